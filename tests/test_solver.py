@@ -1,0 +1,186 @@
+"""Equilibrium, stability and stiffness against closed forms, general forms and re-solved equilibria."""
+
+import numpy as np
+import pytest
+
+from vjm_pin import (
+    EquilibriumSolver,
+    NoEquilibrium,
+    SingularStiffness,
+    load_vjm,
+    loaded_stiffness,
+    unloaded_stiffness,
+)
+from vjm_pin.paper_models import paper_model_urdf
+from vjm_pin.solver import blocks_at, check_stability, stiffness_eq30, stiffness_eq32, stiffness_eq33
+
+from .chains import random_vjm
+
+
+def rel(a, b):
+    return np.linalg.norm(a - b) / max(np.linalg.norm(b), 1e-300)
+
+
+def loaded_equilibrium(vm, seed, size=0.02, **solver_kw):
+    """A converged, stable loaded equilibrium of ``vm`` at a random deflection."""
+    rng = np.random.default_rng(seed)
+    solver = EquilibriumSolver(vm, tol=1e-12, **solver_kw)
+    d = np.zeros(6)
+    d[list(vm.task)] = rng.standard_normal(len(vm.task)) * size
+    res = solver.solve(d)
+    assert res.converged and res.stable, res.path
+    return solver, res
+
+
+# --------------------------------------------------------------------------- eq. 35
+@pytest.mark.parametrize("delta", [1e-4, 0.01, 0.1, 0.3, 0.6, 1.0])
+def test_model_a_stable_branch_matches_eq35(delta):
+    """Model A, S posture: F = (Kθ/L) φ/sin φ, φ = arccos(1 − δ/2) (eq. 35), Kθ = 1 N·m/rad, L = 1 m."""
+    vm = load_vjm(paper_model_urdf("a", "s"))
+    res = EquilibriumSolver(vm, tol=1e-12).solve([-delta, 0, 0])
+    phi = np.arccos(1 - delta / 2)
+    f_analytic = phi / np.sin(phi)
+    assert res.converged and res.stable
+    assert abs(-res.wrench[0] - f_analytic) / f_analytic < 1e-6, (res.wrench, f_analytic)
+    assert abs(res.wrench[1]) < 1e-9
+    # the stable shape is the symmetric trapezoid: θ1 = θ2 = ∓φ
+    assert np.allclose(np.abs(res.theta), phi, atol=1e-8)
+
+
+def test_fixed_point_eq10_and_newton_agree_far_from_buckling():
+    vm = load_vjm(paper_model_urdf("a", "pi"))
+    d = [-0.05, 0.02, 0]
+    a = EquilibriumSolver(vm, method="newton", tol=1e-12).solve(d)
+    b = EquilibriumSolver(vm, method="fixed-point", tol=1e-12, max_iter=500).solve(d)
+    assert a.converged and b.converged
+    assert b.path.startswith("fixed-point") and a.path.startswith("newton")
+    assert np.allclose(a.x, b.x, atol=1e-8)
+    assert rel(a.wrench, b.wrench) < 1e-8
+
+
+# --------------------------------------------------------------------------- eq. 30/32/33
+@pytest.mark.parametrize("seed", range(6))
+def test_eq30_eq32_eq33_agree_at_loaded_stable_equilibria(seed):
+    vm = random_vjm(seed, n_joints=5, n_passive=seed % 3, link_springs=2, spring_dofs=["x", "y", "z", "rx", "ry", "rz"])
+    solver, res = loaded_equilibrium(vm, seed)
+    assert np.abs(res.wrench).max() > 1e-3  # really loaded
+    b = blocks_at(vm, res.x, res.wrench)
+    k30 = stiffness_eq30(b, vm.task)
+    k32 = stiffness_eq32(b, vm.task)
+    k33 = stiffness_eq33(b, vm.task)
+    assert rel(k32.stiffness, k30.stiffness) < 1e-8
+    assert rel(k33.stiffness, k30.stiffness) < 1e-8
+    assert rel(k32.dq_dt, k30.dq_dt) < 1e-8 if vm.n_q else True
+    assert rel(k33.dtheta_dt, k30.dtheta_dt) < 1e-8
+    assert rel(k32.dtheta_dt, k30.dtheta_dt) < 1e-8
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_eq30_eq32_eq33_agree_on_loaded_model_c(seed):
+    beam = dict(section="rectangle", a=0.02, b=0.05, E=2e11, nu=0.3)
+    vm = load_vjm(paper_model_urdf("c", ["s", "pi", "z"][seed], beam=beam))
+    res = EquilibriumSolver(vm, tol=1e-12).solve([-2e-4 * (seed + 1), 1e-4, 0])
+    assert res.converged and res.stable
+    b = blocks_at(vm, res.x, res.wrench)
+    k = [f(b, vm.task).stiffness for f in (stiffness_eq30, stiffness_eq32, stiffness_eq33)]
+    assert rel(k[1], k[0]) < 1e-8 and rel(k[2], k[0]) < 1e-8
+
+
+# --------------------------------------------------------------------------- Table 1
+def test_unloaded_salisbury_for_actuated_chain():
+    """Non-redundant chain, elasticity in the actuators only: K_C = J⁻ᵀ K_θ J⁻¹ (Salisbury)."""
+    vm = random_vjm(11, n_joints=6, n_passive=0, link_springs=0)
+    b = blocks_at(vm, vm.reference, np.zeros(6))
+    j = b.J_theta
+    k_sal = np.linalg.inv(j).T @ vm.K_theta @ np.linalg.inv(j)
+    for method in ("eq30", "eq32", "eq33"):
+        assert rel(unloaded_stiffness(vm, method).stiffness, k_sal) < 1e-8, method
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_unloaded_with_passive_joints_matches_table1(seed):
+    """[[J_θ K_θ⁻¹ J_θᵀ, J_q], [J_qᵀ, 0]]⁻¹, upper-left block (Pashkevich et al. [49])."""
+    vm = random_vjm(20 + seed, n_joints=5, n_passive=1 + seed % 2, link_springs=2, spring_dofs=["x", "y", "z", "rx", "ry", "rz"])
+    b = blocks_at(vm, vm.reference, np.zeros(6))
+    m = 6
+    big = np.block([[b.J_theta @ np.linalg.inv(vm.K_theta) @ b.J_theta.T, b.J_q], [b.J_q.T, np.zeros((vm.n_q, vm.n_q))]])
+    k_tab = np.linalg.inv(big)[:m, :m]
+    k = unloaded_stiffness(vm).stiffness
+    assert rel(k, k_tab) < 1e-8
+    # rank-deficient by the number of passive joints (each lets the end move freely)
+    ev = np.linalg.eigvalsh(0.5 * (k + k.T))
+    assert np.sum(np.abs(ev) < 1e-9 * np.abs(ev).max()) == vm.n_q
+
+
+# --------------------------------------------------------------------------- loaded consistency
+def _fd_check(vm, solver, res, rng, n_dirs=3, h=1e-6):
+    kc = loaded_stiffness(vm, res).stiffness
+    task = list(vm.task)
+    for _ in range(n_dirs):
+        d = np.zeros(6)
+        d[task] = rng.standard_normal(len(task))
+        d *= h / np.linalg.norm(d)
+        from vjm_pin.kinematics import displace
+
+        outs = []
+        for s in (+1, -1):
+            p, r = displace(res.position, res.rotation, s * d)
+            outs.append(solver.solve(target=(p, r), x0=res.x, wrench0=res.wrench))
+        assert all(o.converged for o in outs)
+        df = (outs[0].wrench - outs[1].wrench) / 2
+        assert rel(kc @ d, df) < 1e-4, (kc @ d, df)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_loaded_stiffness_matches_resolved_equilibria(seed):
+    """K_C δt ≈ F(t + δt) − F(t) from re-solved equilibria, with forces and moments (dead load)."""
+    vm = random_vjm(40 + seed, n_joints=5, n_passive=seed % 3, link_springs=2)
+    solver, res = loaded_equilibrium(vm, seed, size=0.05)
+    _fd_check(vm, solver, res, np.random.default_rng(seed))
+
+
+def test_loaded_stiffness_model_c_postbuckling_matches_resolved_equilibria():
+    beam = dict(section="rectangle", a=0.02, b=0.05, E=2e11, nu=0.3)
+    vm = load_vjm(paper_model_urdf("c", "s", beam=beam))
+    solver = EquilibriumSolver(vm, tol=1e-13)
+    res = solver.solve([-1e-3, 0, 0])
+    assert res.converged and res.stable
+    assert abs(res.x[vm.joint_index("base_y")]) > 1e-3  # buckled out of plane
+    _fd_check(vm, solver, res, np.random.default_rng(7))
+
+
+# --------------------------------------------------------------------------- stability
+def test_straight_chain_beyond_critical_is_unstable_and_solver_leaves_it():
+    vm = load_vjm(paper_model_urdf("a", "s"))
+    # straight configuration under a compressive force above Kθ/L: unstable (eq. 23)
+    st = check_stability(blocks_at(vm, vm.reference, np.array([-1.5, 0, 0, 0, 0, 0])))
+    assert not st.stable and st.eigenvalues.max() > 0
+    st = check_stability(blocks_at(vm, vm.reference, np.array([-0.5, 0, 0, 0, 0, 0])))
+    assert st.stable
+
+
+# --------------------------------------------------------------------------- dual problem
+@pytest.mark.parametrize("seed", range(3))
+def test_wrench_driven_equals_displacement_driven(seed):
+    vm = random_vjm(60 + seed, n_joints=6, n_passive=0, link_springs=2)
+    solver, res = loaded_equilibrium(vm, seed, size=0.03)
+    back = solver.solve_wrench(res.wrench)
+    assert back.converged
+    assert np.allclose(back.deflection, res.deflection, atol=1e-8)
+    assert rel(back.wrench, res.wrench) < 1e-8
+
+
+def test_wrench_driven_with_passive_joints_is_refused_with_reason():
+    vm = load_vjm(paper_model_urdf("a", "pi"))
+    with pytest.raises(SingularStiffness, match="passive"):
+        EquilibriumSolver(vm).solve_wrench([-0.5, 0.0, 0, 0, 0, 0])
+
+
+def test_non_convergence_is_reported():
+    vm = load_vjm(paper_model_urdf("a", "s"))
+    solver = EquilibriumSolver(vm, max_iter=1, restarts=0)
+    with pytest.raises(NoEquilibrium) as err:
+        solver.solve([-2.5, 0, 0])  # δ = 2.5 needs a strongly folded chain
+    assert err.value.result is not None and not err.value.result.converged
+    res = solver.solve([-2.5, 0, 0], raise_on_failure=False)
+    assert not res.converged

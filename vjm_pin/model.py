@@ -1,0 +1,377 @@
+"""The VJM model: a URDF that stock Pinocchio loads, plus tags for roles and springs.
+
+Format (see ``docs/format.md``): ordinary URDF, and in the namespace
+``urn:vjm-pin:1`` (prefix ``vjm``), children of ``<robot>``::
+
+    <vjm:task frame="tool0" components="x y z rx ry rz"/>
+    <vjm:joint name="j1" role="passive" position="0.0"/>
+    <vjm:joint name="j2" role="actuated" position="0.3" stiffness="1e5"/>
+    <vjm:joint name="j3" role="actuated" position="0.0"/>            <!-- locked -->
+    <vjm:joint name="link1_tx" role="spring"/>
+    <vjm:spring name="link1" link="link1" joints="link1_tx ... link1_rz">
+      <vjm:stiffness>36 numbers, row-major, SI</vjm:stiffness>
+      <vjm:rest>6 numbers (θ0)</vjm:rest>
+      <vjm:beam length="1" section="rectangle" a="0.02" b="0.05" E="2e11" G="7.7e10"/>
+    </vjm:spring>
+
+Pinocchio's URDF parser ignores the namespaced elements.
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from .exceptions import (
+    FrameNotFound,
+    InputError,
+    JointNotFound,
+    ModelError,
+    RoleError,
+    StiffnessMatrixError,
+    UrdfParseError,
+)
+
+NS = "urn:vjm-pin:1"
+ROLES = ("passive", "spring", "actuated")
+COMPONENTS = ("x", "y", "z", "rx", "ry", "rz")
+_Q = f"{{{NS}}}"
+
+ET.register_namespace("vjm", NS)
+
+
+def _parse_numbers(text: str | None, what: str) -> np.ndarray:
+    try:
+        vals = np.array([float(v) for v in (text or "").replace(",", " ").split()], dtype=float)
+    except ValueError as e:
+        raise ModelError(f"{what}: not a list of numbers ({e})") from None
+    if not np.all(np.isfinite(vals)):
+        raise ModelError(f"{what}: contains NaN or infinite values")
+    return vals
+
+
+def check_stiffness_matrix(k: np.ndarray, n: int, name: str) -> np.ndarray:
+    """Return ``k`` as an (n, n) float array after checking that it is symmetric
+    positive definite; raise :class:`StiffnessMatrixError` naming ``name`` otherwise."""
+    k = np.asarray(k, dtype=float)
+    if k.ndim == 0 and n == 1:
+        k = k.reshape(1, 1)
+    if k.shape != (n, n):
+        raise StiffnessMatrixError(
+            f"spring '{name}': stiffness matrix has shape {k.shape}, expected ({n}, {n}) for its {n} joint(s)"
+        )
+    if not np.all(np.isfinite(k)):
+        raise StiffnessMatrixError(f"spring '{name}': stiffness matrix contains NaN or infinite values")
+    scale = max(np.abs(k).max(), 1e-300)
+    if np.abs(k - k.T).max() > 1e-9 * scale:
+        raise StiffnessMatrixError(f"spring '{name}': stiffness matrix is not symmetric")
+    ev = np.linalg.eigvalsh(0.5 * (k + k.T))
+    if ev.min() <= 1e-12 * ev.max() or ev.max() <= 0.0:
+        raise StiffnessMatrixError(
+            f"spring '{name}': stiffness matrix is not positive definite (eigenvalues {ev.min():.3g} … {ev.max():.3g})"
+        )
+    return 0.5 * (k + k.T)
+
+
+@dataclass(frozen=True)
+class SpringGroup:
+    """One (possibly multidimensional, coupled) virtual spring.
+
+    Attributes:
+        name: Spring name.
+        joints: Names of its joints, in the order of the matrix rows.
+        stiffness: (k, k) SPD stiffness matrix in SI (N/m, N·m/rad, N/rad), joint coordinates.
+        rest: (k,) rest values θ0 of the joints (m or rad): the preload.
+        link: The link whose flexibility the spring models (None for actuator springs).
+        beam: Beam parameters it was derived from (``vjm_pin.beam.Beam.to_dict()`` keys), if any.
+    """
+
+    name: str
+    joints: tuple[str, ...]
+    stiffness: np.ndarray
+    rest: np.ndarray
+    link: str | None = None
+    beam: dict | None = None
+
+
+@dataclass(frozen=True)
+class VjmModel:
+    """A manipulator in the VJM form, ready for the solver.
+
+    Attributes:
+        model: The Pinocchio model (every joint 1-DOF revolute or prismatic, nq = nv).
+        name: Model name.
+        frame: End (task) frame name.
+        frame_id: Its Pinocchio frame index.
+        task: Indices of the constrained task components in (x, y, z, rx, ry, rz).
+        roles: Joint name → ``"passive"``, ``"spring"``, ``"actuated"`` (with a stiffness: a
+            1-D spring) or ``"locked"`` (actuated without a stiffness).
+        springs: The spring groups (actuator springs included, as 1-D groups).
+        reference: (nq,) unloaded configuration: commanded actuator positions, spring rest
+            values θ0, passive joints at their given positions (m, rad).
+        theta_idx: Indices (into the configuration) of the spring coordinates θ, group order.
+        q_idx: Indices of the perfect passive coordinates q.
+        K_theta: (nθ, nθ) block-diagonal stiffness of all springs, in ``theta_idx`` order.
+        theta0: (nθ,) rest values θ0.
+        urdf: The URDF text the model was read from.
+    """
+
+    model: object
+    name: str
+    frame: str
+    frame_id: int
+    task: tuple[int, ...]
+    roles: dict
+    springs: tuple[SpringGroup, ...]
+    reference: np.ndarray
+    theta_idx: np.ndarray
+    q_idx: np.ndarray
+    K_theta: np.ndarray
+    theta0: np.ndarray
+    urdf: str = field(repr=False, default="")
+
+    # ------------------------------------------------------------------ names
+    @property
+    def joint_names(self) -> list[str]:
+        """Names of the configuration coordinates, index order."""
+        return list(self.model.names[1:])
+
+    @property
+    def theta_names(self) -> list[str]:
+        names = self.joint_names
+        return [names[i] for i in self.theta_idx]
+
+    @property
+    def q_names(self) -> list[str]:
+        names = self.joint_names
+        return [names[i] for i in self.q_idx]
+
+    @property
+    def task_names(self) -> list[str]:
+        return [COMPONENTS[i] for i in self.task]
+
+    @property
+    def n_theta(self) -> int:
+        return len(self.theta_idx)
+
+    @property
+    def n_q(self) -> int:
+        return len(self.q_idx)
+
+    def joint_index(self, name: str) -> int:
+        """Configuration index of joint ``name``; :class:`JointNotFound` if unknown."""
+        names = self.joint_names
+        if name not in names:
+            raise JointNotFound(name, names)
+        return names.index(name)
+
+    def with_positions(self, positions: dict) -> VjmModel:
+        """A copy whose reference configuration has the given joint values (m, rad).
+
+        Actuated/locked joints: the commanded position (θ0 of an actuator spring);
+        passive joints: the starting value; virtual spring joints cannot be set (their
+        reference is the rest value of their spring)."""
+        ref = self.reference.copy()
+        theta0 = self.theta0.copy()
+        springs = list(self.springs)
+        for name, value in positions.items():
+            i = self.joint_index(name)
+            v = float(value)
+            if not math.isfinite(v):
+                raise InputError(f"joint '{name}': position must be finite, got {value}")
+            role = self.roles[name]
+            if role == "spring":
+                raise RoleError(f"joint '{name}' is a virtual spring joint; its position is its rest value")
+            ref[i] = v
+            if role == "actuated":
+                pos = list(self.theta_idx).index(i)
+                theta0[pos] = v
+                for g, grp in enumerate(springs):
+                    if grp.joints == (name,):
+                        springs[g] = replace(grp, rest=np.array([v]))
+        return replace(self, reference=ref, theta0=theta0, springs=tuple(springs))
+
+
+def _read_root(source: str | Path) -> tuple[ET.Element, str, str]:
+    """Parse URDF text or a path; return (root element, text, display name)."""
+    text: str
+    label: str
+    if isinstance(source, Path) or (isinstance(source, str) and "<" not in source):
+        p = Path(source)
+        if not p.is_file():
+            raise UrdfParseError(f"URDF file not found: {p}")
+        text = p.read_text()
+        label = str(p)
+    else:
+        text = str(source)
+        label = "<urdf string>"
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as e:
+        raise UrdfParseError(f"{label}: malformed XML: {e}") from None
+    if root.tag != "robot":
+        raise UrdfParseError(f"{label}: root element is <{root.tag}>, expected <robot>")
+    return root, text, label
+
+
+def build_pin_model(text: str, label: str = "<urdf string>"):
+    """Build a Pinocchio model from URDF text, re-raising its errors as :class:`UrdfParseError`."""
+    import pinocchio as pin
+
+    try:
+        return pin.buildModelFromXML(text)
+    except (ValueError, RuntimeError) as e:
+        first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        raise UrdfParseError(f"{label}: Pinocchio could not load the URDF: {first}") from None
+
+
+def load_vjm(source: str | Path) -> VjmModel:
+    """Load and validate a VJM URDF (path or XML text).
+
+    Raises:
+        UrdfParseError: malformed XML or a URDF Pinocchio rejects.
+        RoleError: a non-fixed joint without a role, with two roles, or a spring joint
+            outside (or in two) spring groups; an unsupported joint type.
+        JointNotFound, FrameNotFound: a tag names a joint/frame the URDF does not have.
+        StiffnessMatrixError: a matrix of the wrong size, not symmetric or not SPD.
+    """
+    root, text, label = _read_root(source)
+    model = build_pin_model(text, label)
+    joint_names = list(model.names[1:])
+    frame_names = [f.name for f in model.frames]
+
+    for j, jm in enumerate(model.joints[1:], start=1):
+        if jm.nq != 1 or jm.nv != 1:
+            raise RoleError(
+                f"joint '{model.names[j]}' is a {jm.shortname()} (nq={jm.nq}, nv={jm.nv}); the VJM format needs "
+                "1-DOF revolute or prismatic joints (the generator turns 'continuous' into 'revolute' and "
+                "'floating'/'planar' into chains of 1-DOF joints)"
+            )
+
+    # --- task
+    tasks = root.findall(f"{_Q}task")
+    if len(tasks) != 1:
+        raise ModelError(f"{label}: expected exactly one <vjm:task frame=... /> element, found {len(tasks)}")
+    frame = tasks[0].get("frame")
+    if not frame:
+        raise ModelError(f"{label}: <vjm:task> has no 'frame' attribute")
+    if not model.existFrame(frame):
+        raise FrameNotFound(frame, frame_names, "vjm:task")
+    comps = (tasks[0].get("components") or " ".join(COMPONENTS)).split()
+    for c in comps:
+        if c not in COMPONENTS:
+            raise ModelError(f"{label}: task component '{c}' is not one of {list(COMPONENTS)}")
+    if len(set(comps)) != len(comps) or not comps:
+        raise ModelError(f"{label}: task components {comps} must be distinct and non-empty")
+    task = tuple(sorted(COMPONENTS.index(c) for c in comps))
+
+    # --- roles
+    roles: dict[str, str] = {}
+    positions: dict[str, float] = {}
+    act_stiff: dict[str, float] = {}
+    for el in root.findall(f"{_Q}joint"):
+        name = el.get("name")
+        if name is None:
+            raise RoleError(f"{label}: <vjm:joint> without 'name'")
+        if name not in joint_names:
+            raise JointNotFound(name, joint_names, "vjm:joint; fixed joints take no role")
+        if name in roles:
+            raise RoleError(f"joint '{name}' has more than one <vjm:joint> role tag")
+        role = el.get("role")
+        if role not in ROLES:
+            raise RoleError(f"joint '{name}': role '{role}' is not one of {list(ROLES)}")
+        if el.get("position") is not None:
+            (positions[name],) = _parse_numbers(el.get("position"), f"joint '{name}' position")[:1]
+        if el.get("stiffness") is not None:
+            if role != "actuated":
+                raise RoleError(f"joint '{name}': 'stiffness' is only for actuated joints (springs use <vjm:spring>)")
+            (k,) = _parse_numbers(el.get("stiffness"), f"joint '{name}' stiffness")[:1]
+            check_stiffness_matrix(np.array([[k]]), 1, name)
+            act_stiff[name] = float(k)
+        roles[name] = role
+    missing = [n for n in joint_names if n not in roles]
+    if missing:
+        raise RoleError(f"joint(s) {missing} have no role: add <vjm:joint name=... role=\"passive|spring|actuated\"/>")
+
+    # --- springs
+    springs: list[SpringGroup] = []
+    owner: dict[str, str] = {}
+    for el in root.findall(f"{_Q}spring"):
+        sname = el.get("name") or "<unnamed>"
+        joints = tuple((el.get("joints") or "").split())
+        if not joints:
+            raise ModelError(f"spring '{sname}' lists no joints")
+        for jn in joints:
+            if jn not in joint_names:
+                raise JointNotFound(jn, joint_names, f"spring '{sname}'")
+            if roles.get(jn) != "spring":
+                raise RoleError(f"joint '{jn}' is in spring '{sname}' but its role is '{roles.get(jn)}', not 'spring'")
+            if jn in owner:
+                raise RoleError(f"joint '{jn}' is in two springs: '{owner[jn]}' and '{sname}'")
+            owner[jn] = sname
+        n = len(joints)
+        st = el.find(f"{_Q}stiffness")
+        if st is None:
+            raise StiffnessMatrixError(f"spring '{sname}' has no <vjm:stiffness> matrix")
+        vals = _parse_numbers(st.text, f"spring '{sname}' stiffness")
+        if vals.size != n * n:
+            raise StiffnessMatrixError(
+                f"spring '{sname}': stiffness has {vals.size} numbers, expected {n * n} ({n}x{n} for its {n} joints)"
+            )
+        k = check_stiffness_matrix(vals.reshape(n, n), n, sname)
+        rest_el = el.find(f"{_Q}rest")
+        rest = np.zeros(n) if rest_el is None else _parse_numbers(rest_el.text, f"spring '{sname}' rest")
+        if rest.size != n:
+            raise ModelError(f"spring '{sname}': rest has {rest.size} values, expected {n}")
+        beam_el = el.find(f"{_Q}beam")
+        beam = None
+        if beam_el is not None:
+            beam = {}
+            for key, v in beam_el.attrib.items():
+                beam[key] = v if key in ("section", "dofs") else float(v)
+        springs.append(SpringGroup(sname, joints, k, rest, el.get("link"), beam))
+    orphans = [n for n, r in roles.items() if r == "spring" and n not in owner]
+    if orphans:
+        raise RoleError(f"spring joint(s) {orphans} belong to no <vjm:spring> group")
+    for name, k in act_stiff.items():
+        springs.append(SpringGroup(name, (name,), np.array([[k]]), np.array([positions.get(name, 0.0)])))
+
+    full_roles = {n: ("locked" if r == "actuated" and n not in act_stiff else r) for n, r in roles.items()}
+    reference = np.zeros(model.nq)
+    for n, v in positions.items():
+        reference[joint_names.index(n)] = v
+    theta_idx, blocks, theta0 = [], [], []
+    for g in springs:
+        for jn, r in zip(g.joints, g.rest):
+            theta_idx.append(joint_names.index(jn))
+            reference[joint_names.index(jn)] = r
+        blocks.append(g.stiffness)
+        theta0.extend(g.rest)
+    from scipy.linalg import block_diag
+
+    K = block_diag(*blocks) if blocks else np.zeros((0, 0))
+    q_idx = [i for i, n in enumerate(joint_names) if full_roles[n] == "passive"]
+    for i, r in enumerate(reference):
+        if not math.isfinite(r):
+            raise InputError(f"joint '{joint_names[i]}': position is not finite")
+    if not springs:
+        raise RoleError(f"{label}: the model has no spring (no <vjm:spring> and no actuated joint with a stiffness)")
+    return VjmModel(
+        model=model,
+        name=root.get("name", "robot"),
+        frame=frame,
+        frame_id=int(model.getFrameId(frame)),
+        task=task,
+        roles=full_roles,
+        springs=tuple(springs),
+        reference=reference,
+        theta_idx=np.array(theta_idx, dtype=int),
+        q_idx=np.array(q_idx, dtype=int),
+        K_theta=np.asarray(K, dtype=float),
+        theta0=np.array(theta0, dtype=float),
+        urdf=text,
+    )

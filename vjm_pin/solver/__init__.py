@@ -1,0 +1,62 @@
+"""Solver layer: equilibrium (eq. 5–11), stability (eq. 19–23), stiffness (eq. 28–33).
+
+Pure functions on numpy arrays and small dataclasses; no printing, no file I/O.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..kinematics import Kinematics
+from ..model import VjmModel
+from .blocks import Blocks, evaluate_blocks, full_wrench
+from .equilibrium import EquilibriumResult, EquilibriumSolver, solve_equilibrium, solve_for_wrench
+from .stability import StabilityResult, check_stability, null_space, reduced_matrix
+from .stiffness import (
+    StiffnessResult,
+    eq28_matrix,
+    stiffness_eq30,
+    stiffness_eq32,
+    stiffness_eq33,
+    stiffness_from_blocks,
+)
+
+
+def blocks_at(vm: VjmModel, x: np.ndarray, wrench: np.ndarray, kin: Kinematics | None = None) -> Blocks:
+    """:class:`Blocks` of model ``vm`` at configuration ``x`` under the 6-D ``wrench``."""
+    kin = kin or Kinematics(vm.model, vm.frame_id)
+    return evaluate_blocks(vm, kin, np.asarray(x, float), np.asarray(wrench, float))
+
+
+def loaded_stiffness(vm: VjmModel, eq: EquilibriumResult, method: str = "eq30", kin: Kinematics | None = None) -> StiffnessResult:
+    """Loaded Cartesian stiffness K_C (and K_q, K_θ) at the equilibrium ``eq`` (eq. 30/32/33)."""
+    return stiffness_from_blocks(blocks_at(vm, eq.x, eq.wrench, kin), vm.task, method)
+
+
+def unloaded_stiffness(vm: VjmModel, method: str = "eq30", kin: Kinematics | None = None) -> StiffnessResult:
+    """Stiffness at the unloaded reference configuration (H = 0: Table 1 of the paper)."""
+    return stiffness_from_blocks(blocks_at(vm, vm.reference, np.zeros(6), kin), vm.task, method)
+
+
+__all__ = [
+    "Blocks",
+    "EquilibriumResult",
+    "EquilibriumSolver",
+    "StabilityResult",
+    "StiffnessResult",
+    "blocks_at",
+    "check_stability",
+    "eq28_matrix",
+    "evaluate_blocks",
+    "full_wrench",
+    "loaded_stiffness",
+    "null_space",
+    "reduced_matrix",
+    "solve_equilibrium",
+    "solve_for_wrench",
+    "stiffness_eq30",
+    "stiffness_eq32",
+    "stiffness_eq33",
+    "stiffness_from_blocks",
+    "unloaded_stiffness",
+]

@@ -1,0 +1,567 @@
+"""Loaded static equilibrium (paper §4.1, eq. 5–11).
+
+For a prescribed end location ``t`` the unknowns are the wrench ``F`` and the
+configuration ``(q, θ)`` that satisfy eq. (5)::
+
+    J_θᵀ F = K_θ (θ − θ₀),    J_qᵀ F = 0,    t = g(q, θ).
+
+This is the stationarity (KKT) system of "minimise the spring energy
+E = ½(θ−θ₀)ᵀK_θ(θ−θ₀) subject to g(q, θ) = t", with ``F`` the Lagrange multiplier; a
+stable equilibrium is a constrained energy minimum (eq. 23).
+
+Two iterations are offered:
+
+``"fixed-point"`` — the paper's scheme (eq. 9–10), written in increments so that
+    orientation errors use ``log3``: ``[[J_θ K_θ⁻¹ J_θᵀ, J_q], [J_qᵀ, 0]] [F; Δq] =
+    [e + J_θ(θ − θ₀); 0]``, ``θ⁺ = θ₀ + K_θ⁻¹ J_θᵀ F``. It ignores the Hessians, converges
+    linearly far from buckling, stalls next to a bifurcation and is singular for a straight
+    chain of rigid links.
+``"newton"`` (default) — Newton's method on eq. (5); its Jacobian is the matrix of
+    eq. (28). When a stable branch is followed the reduced Hessian is shifted to be
+    positive definite (so the step descends the energy) and a step is only accepted if it
+    decreases the ℓ₁ merit ``E + ρ‖t − g‖₁`` or, when it is an unmodified Newton step,
+    the residual of eq. (5); an energy-increasing step is never taken.
+
+Both are wrapped in continuation (``t_i = α_i t + (1−α_i) t₀``, eq. after 10) and
+perturbed restarts (small seeded random noise on ``(q, θ)``, §4.1) when an iteration
+stalls or converges to an unstable equilibrium. The result says which path was used.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import pinocchio as pin
+
+from ..exceptions import InputError, NoEquilibrium, SingularStiffness
+from ..kinematics import Kinematics, deflection, displace, pose_error
+from ..model import VjmModel
+from .blocks import evaluate_blocks, full_wrench
+from .stability import StabilityResult, check_stability, null_space
+from .stiffness import stiffness_from_blocks
+
+METHODS = ("newton", "fixed-point")
+
+
+@dataclass(frozen=True)
+class EquilibriumResult:
+    """A loaded equilibrium.
+
+    Attributes:
+        x: (nq,) full configuration (m, rad), Pinocchio order.
+        q: (n_q,) perfect passive coordinates.
+        theta: (n_θ,) spring coordinates.
+        wrench: (6,) external wrench applied to the end frame at equilibrium: force (N) at
+            the frame origin and moment (N·m), world axes; zero for unconstrained components.
+        deflection: (6,) end location minus the unloaded one: (m, world rotation vector rad).
+        position: (3,) end frame position (m). rotation: (3, 3) end frame orientation.
+        converged: Whether eq. (5) holds to the tolerance.
+        iterations: Total iterations over all attempts.
+        residuals: ``position`` (m), ``orientation`` (rad), ``statics`` (max |eq. 5 static
+            residual|, N·m or N) at the returned configuration.
+        energy: Spring energy ½(θ−θ₀)ᵀK_θ(θ−θ₀) (J).
+        path: How it was found, e.g. ``"newton"``, ``"newton+continuation(4)"``,
+            ``"newton+restart(2)"``, ``"fixed-point"``.
+        stability: :class:`StabilityResult` of eq. (23), or None if not evaluated.
+    """
+
+    x: np.ndarray
+    q: np.ndarray
+    theta: np.ndarray
+    wrench: np.ndarray
+    deflection: np.ndarray
+    position: np.ndarray
+    rotation: np.ndarray
+    converged: bool
+    iterations: int
+    residuals: dict = field(default_factory=dict)
+    energy: float = 0.0
+    path: str = ""
+    stability: StabilityResult | None = None
+
+    @property
+    def stable(self) -> bool | None:
+        return None if self.stability is None else self.stability.stable
+
+    def residual(self) -> float:
+        """Largest of the three residual norms (mixed units; 0 at an exact equilibrium)."""
+        return float(max(self.residuals.values())) if self.residuals else float("nan")
+
+
+def _as_target(vm, kin, p0, r0, deflection_=None, target=None):
+    if (deflection_ is None) == (target is None):
+        raise InputError("give exactly one of a deflection or a target pose")
+    if deflection_ is not None:
+        d = np.asarray(deflection_, dtype=float).ravel()
+        if d.size == 3:
+            d = np.concatenate([d, np.zeros(3)])
+        if d.size != 6:
+            raise InputError(f"deflection must have 3 or 6 components (m, rad), got {d.size}")
+        if not np.all(np.isfinite(d)):
+            raise InputError(f"deflection contains NaN or infinite values: {d.tolist()}")
+        return displace(p0, r0, d)
+    p, r = target
+    p = np.asarray(p, float)
+    r = np.asarray(r, float)
+    if p.shape != (3,) or r.shape != (3, 3) or not (np.all(np.isfinite(p)) and np.all(np.isfinite(r))):
+        raise InputError("target must be a finite position (3,) and rotation (3, 3)")
+    return p, r
+
+
+class EquilibriumSolver:
+    """Solves eq. (5) for one model; keeps a Pinocchio ``Data`` and the reference pose.
+
+    Args:
+        vm: The model.
+        method: ``"newton"`` (default) or ``"fixed-point"`` (eq. 10).
+        tol: Relative tolerance: position error ≤ tol·L_c (L_c = size of the chain),
+            orientation error ≤ tol rad, static residual ≤ tol·max(|K_θ(θ−θ₀)|, 1e-6·|K_θ|).
+        max_iter: Iterations per attempt.
+        restarts: Perturbed restarts after a stall or an unstable result.
+        perturbation: Size of the restart noise (rad; ×L_c·1e-3 for prismatic coordinates).
+        seed: Seed of the restart noise (results are reproducible).
+        follow_stable: Prefer stable equilibria: inertia-corrected Newton steps and restarts
+            when the converged equilibrium is unstable (eq. 23).
+    """
+
+    def __init__(
+        self,
+        vm: VjmModel,
+        *,
+        method: str = "newton",
+        tol: float = 1e-10,
+        max_iter: int = 60,
+        restarts: int = 8,
+        perturbation: float = 1e-3,
+        seed: int = 0,
+        follow_stable: bool = True,
+    ):
+        if method not in METHODS:
+            raise ValueError(f"unknown method '{method}'; choose one of {METHODS}")
+        self.vm = vm
+        self.kin = Kinematics(vm.model, vm.frame_id)
+        self.method = method
+        self.tol = tol
+        self.max_iter = max_iter
+        self.restarts = restarts
+        self.perturbation = perturbation
+        self.seed = seed
+        self.follow_stable = follow_stable
+        self.max_step = 0.3
+        self.debug = False
+        self.p0, self.r0 = self.kin.placement(vm.reference)
+        self.task = list(vm.task)
+        self.free = np.concatenate([vm.theta_idx, vm.q_idx]).astype(int)
+        self.nt = vm.n_theta
+        pin.forwardKinematics(vm.model, self.kin.data, vm.reference)
+        pts = [m.translation for m in self.kin.data.oMi[1:]] + [self.p0]
+        self.length_scale = max(max(np.linalg.norm(p - self.p0) for p in pts), 1e-3)
+        prism = np.array([vm.model.joints[i + 1].shortname().startswith("JointModelP") for i in range(vm.model.nv)])
+        self.var_scale = np.where(prism[self.free], self.length_scale, 1.0)
+        self.kscale = float(np.abs(vm.K_theta).max())
+        self.Kinv = np.linalg.inv(vm.K_theta)
+        metric = np.diag(1e-6 * self.kscale / self.var_scale**2)
+        metric[: self.nt, : self.nt] += vm.K_theta
+        self.Minv = np.linalg.inv(metric)
+
+    # ----------------------------------------------------------------- helpers
+    def energy(self, x: np.ndarray) -> float:
+        d = x[self.vm.theta_idx] - self.vm.theta0
+        return 0.5 * float(d @ self.vm.K_theta @ d)
+
+    def _residuals(self, x, f, state, p_t, r_t):
+        vm = self.vm
+        e = pose_error(p_t, r_t, state.position, state.rotation)[self.task]
+        jz = state.jacobian[self.task][:, self.free]
+        tau = vm.K_theta @ (x[vm.theta_idx] - vm.theta0)
+        grad = np.concatenate([tau, np.zeros(vm.n_q)])
+        r = grad - jz.T @ f
+        tp = [i for i, t in enumerate(self.task) if t < 3]
+        tr = [i for i, t in enumerate(self.task) if t >= 3]
+        res = {
+            "position": float(np.abs(e[tp]).max()) if tp else 0.0,
+            "orientation": float(np.abs(e[tr]).max()) if tr else 0.0,
+            "statics": float(np.abs(r).max()) if r.size else 0.0,
+        }
+        stat_scale = max(float(np.abs(tau).max()) if tau.size else 0.0, 1e-6 * self.kscale)
+        ok = (
+            res["position"] <= self.tol * self.length_scale
+            and res["orientation"] <= self.tol
+            and res["statics"] <= self.tol * stat_scale
+        )
+        return e, jz, grad, r, res, ok
+
+    def _kkt_norm(self, e, r):
+        return float(np.linalg.norm(e / np.where(np.array(self.task) < 3, self.length_scale, 1.0)) + np.linalg.norm(r) / max(self.kscale, 1e-300))
+
+    # ----------------------------------------------------------------- iterations
+    def _iterate(self, x, f, p_t, r_t, max_iter):
+        """One attempt from (x, f); returns (x, f, iterations, converged, state)."""
+        if self.method == "fixed-point":
+            return self._fixed_point(x, f, p_t, r_t, max_iter)
+        return self._newton(x, f, p_t, r_t, max_iter)
+
+    def _newton(self, x, f, p_t, r_t, max_iter):
+        """Newton on eq. (5) (matrix of eq. 28), kept on the constraint ``g = t``.
+
+        Every iterate is first made geometrically feasible by least-energy restoration
+        steps (:meth:`_restore`); then the spring energy itself is the merit function. When a
+        stable branch is followed the reduced Hessian is shifted to be positive definite, so
+        the step descends the energy, and a step is accepted only if the energy does not
+        increase (Armijo), or, for an unmodified Newton step, if the residual of eq. (5)
+        falls. With ``follow_stable=False`` full Newton steps are taken (unstable branches).
+        """
+        vm = self.vm
+        kz = np.zeros((len(self.free), len(self.free)))
+        kz[: self.nt, : self.nt] = vm.K_theta
+        m = len(self.task)
+        n = len(self.free)
+        x, state, ok = self._restore(x.copy(), None, p_t, r_t, max_iter=40)
+        if not ok:
+            return x, f, 0, False, state
+        for it in range(max_iter + 1):
+            jz = state.jacobian[self.task][:, self.free]
+            tau = vm.K_theta @ (x[vm.theta_idx] - vm.theta0)
+            grad = np.concatenate([tau, np.zeros(vm.n_q)])
+            f = np.linalg.lstsq(jz.T, grad, rcond=None)[0]  # least-squares multiplier
+            e, jz, grad, r, res, ok = self._residuals(x, f, state, p_t, r_t)
+            if ok:
+                return x, f, it, True, state
+            if it == max_iter:
+                break
+            h = state.psi_hessian(full_wrench(vm, f))[np.ix_(self.free, self.free)]
+            w = kz - h
+            modified = False
+            if self.follow_stable:
+                z = null_space(jz[:, : self.nt], jz[:, self.nt :])
+                if z.shape[1]:
+                    red = z.T @ w @ z
+                    lam = np.linalg.eigvalsh(0.5 * (red + red.T)).min()
+                    delta = 1e-8 * self.kscale
+                    if lam < delta:
+                        w = w + (delta - lam + 1e-3 * abs(lam)) * np.eye(n)
+                        modified = True
+            a = np.zeros((n + m, n + m))
+            a[:n, :n] = w
+            a[:n, n:] = -jz.T
+            a[n:, :n] = jz
+            rhs = np.concatenate([-r, e])
+            try:
+                sol = np.linalg.solve(a, rhs)
+                if not np.all(np.isfinite(sol)):
+                    raise np.linalg.LinAlgError
+            except np.linalg.LinAlgError:
+                sol = np.linalg.lstsq(a, rhs, rcond=None)[0]
+            dz = sol[:n]
+            smax = np.abs(dz / self.var_scale).max() if n else 0.0
+            if smax > self.max_step:
+                dz = dz * (self.max_step / smax)
+                modified = True
+            e0 = self.energy(x)
+            slope = float(grad @ dz)
+            kkt0 = self._kkt_norm(e, r)
+            alpha = 1.0
+            accepted = False
+            for _ in range(30):
+                xn = x.copy()
+                xn[self.free] += alpha * dz
+                xn, sn, feas = self._restore(xn, None, p_t, r_t)
+                if feas:
+                    en_ = self.energy(xn)
+                    if not self.follow_stable:
+                        accepted = True
+                    elif en_ <= e0 + 1e-4 * alpha * min(slope, 0.0) + 1e-14 * max(abs(e0), 1e-300):
+                        accepted = True
+                    elif alpha == 1.0 and not modified:
+                        tau_n = vm.K_theta @ (xn[vm.theta_idx] - vm.theta0)
+                        jn = sn.jacobian[self.task][:, self.free]
+                        gn = np.concatenate([tau_n, np.zeros(vm.n_q)])
+                        fn = np.linalg.lstsq(jn.T, gn, rcond=None)[0]
+                        e_n, _, _, r_n, _, _ = self._residuals(xn, fn, sn, p_t, r_t)
+                        accepted = self._kkt_norm(e_n, r_n) < 0.5 * kkt0
+                    if self.debug:
+                        print(f"   it {it} alpha {alpha:.3g} dE {en_ - e0:.4g} slope {slope:.3g} mod {modified} acc {accepted}")
+                if accepted:
+                    break
+                alpha *= 0.5
+            if not accepted:
+                return x, f, it + 1, False, state
+            x, state = xn, sn
+        return x, f, max_iter, False, state
+
+    def _restore(self, x, state, p_t, r_t, max_iter: int = 12):
+        """Least-energy restoration of ``g(x) = t``: repeated steps ``δ = M⁻¹Jᵀ(J M⁻¹ Jᵀ)⁻¹ e``
+        with the metric ``M = diag(K_θ, 0) + ε·I`` (passive joints move first, as in the
+        fixed-point scheme of eq. 10). Returns (x, state, converged)."""
+        tol_p = self.tol * self.length_scale
+        for _ in range(max_iter + 1):
+            if state is None:
+                state = self.kin.evaluate(x)
+            e = pose_error(p_t, r_t, state.position, state.rotation)[self.task]
+            scaled = np.abs(e / np.where(np.array(self.task) < 3, self.length_scale, 1.0)).max() if e.size else 0.0
+            if scaled <= 0.01 * self.tol:
+                return x, state, True
+            jz = state.jacobian[self.task][:, self.free]
+            a = jz @ self.Minv @ jz.T
+            try:
+                delta = self.Minv @ jz.T @ np.linalg.solve(a, e)
+            except np.linalg.LinAlgError:
+                return x, state, False
+            if not np.all(np.isfinite(delta)):
+                return x, state, False
+            big = np.abs(delta / self.var_scale).max()
+            if big > self.max_step:  # damped (far from the constraint, e.g. a straight chain)
+                delta *= self.max_step / big
+            x = x.copy()
+            x[self.free] += delta
+            state = None
+        state = self.kin.evaluate(x)
+        e = pose_error(p_t, r_t, state.position, state.rotation)[self.task]
+        return x, state, bool(np.abs(e).max() <= max(tol_p, self.tol))
+
+    def _fixed_point(self, x, f, p_t, r_t, max_iter):
+        vm = self.vm
+        x = x.copy()
+        state = self.kin.evaluate(x, hessian=False)
+        for it in range(max_iter + 1):
+            e, jz, _, _, res, ok = self._residuals(x, f, state, p_t, r_t)
+            if ok and it > 0:
+                return x, f, it, True, self.kin.evaluate(x)
+            if it == max_iter:
+                break
+            jt, jq = jz[:, : self.nt], jz[:, self.nt :]
+            m, nq = jt.shape[0], jq.shape[1]
+            a = np.zeros((m + nq, m + nq))
+            a[:m, :m] = jt @ self.Kinv @ jt.T
+            a[:m, m:] = jq
+            a[m:, :m] = jq.T
+            theta = x[vm.theta_idx]
+            rhs = np.concatenate([e + jt @ (theta - vm.theta0), np.zeros(nq)])
+            try:
+                sol = np.linalg.solve(a, rhs)
+            except np.linalg.LinAlgError:
+                return x, f, it, False, self.kin.evaluate(x)
+            f = sol[:m]
+            x[vm.q_idx] += sol[m:]
+            x[vm.theta_idx] = vm.theta0 + self.Kinv @ jt.T @ f
+            if not np.all(np.isfinite(x)):
+                return x, f, it, False, self.kin.evaluate(np.nan_to_num(x))
+            state = self.kin.evaluate(x, hessian=False)
+        return x, f, max_iter, False, self.kin.evaluate(x)
+
+    # ----------------------------------------------------------------- public
+    def _result(self, x, f, iters, ok, state, p_t, r_t, path, with_stability=True) -> EquilibriumResult:
+        vm = self.vm
+        _, _, _, _, res, _ = self._residuals(x, f, state, p_t, r_t)
+        w6 = full_wrench(vm, f)
+        stab = None
+        if with_stability and ok:
+            stab = check_stability(evaluate_blocks(vm, self.kin, x, w6, state))
+        return EquilibriumResult(
+            x=x.copy(),
+            q=x[vm.q_idx].copy(),
+            theta=x[vm.theta_idx].copy(),
+            wrench=w6,
+            deflection=deflection(self.p0, self.r0, state.position, state.rotation),
+            position=state.position.copy(),
+            rotation=state.rotation.copy(),
+            converged=bool(ok),
+            iterations=int(iters),
+            residuals=res,
+            energy=self.energy(x),
+            path=path,
+            stability=stab,
+        )
+
+    def _perturb(self, x, rng):
+        xn = x.copy()
+        noise = rng.standard_normal(len(self.free)) * self.perturbation
+        noise = np.where(self.var_scale > 1.0, noise * 1e-3 * self.length_scale, noise)
+        xn[self.free] += noise
+        return xn
+
+    def solve(
+        self,
+        deflection=None,
+        *,
+        target=None,
+        x0: np.ndarray | None = None,
+        wrench0: np.ndarray | None = None,
+        raise_on_failure: bool = True,
+    ) -> EquilibriumResult:
+        """Equilibrium for a prescribed end location.
+
+        Args:
+            deflection: (6,) or (3,) deflection from the unloaded end location: position
+                (m) and world rotation vector (rad). Or give ``target``.
+            target: (position (3,), rotation (3, 3)) of the end frame.
+            x0: Starting configuration (nq,); default the unloaded reference (warm start
+                from a neighbouring equilibrium when tracing a curve).
+            wrench0: Starting wrench (6,) (N, N·m); default zero.
+            raise_on_failure: Raise :class:`NoEquilibrium` (carrying the last iterate) when
+                no attempt converges; otherwise return it with ``converged=False``.
+        """
+        vm = self.vm
+        p_t, r_t = _as_target(vm, self.kin, self.p0, self.r0, deflection, target)
+        x_start = vm.reference.copy() if x0 is None else np.asarray(x0, float).copy()
+        if x_start.shape != (vm.model.nq,) or not np.all(np.isfinite(x_start)):
+            raise InputError(f"x0 must be a finite configuration of size {vm.model.nq}")
+        f_start = np.zeros(len(self.task)) if wrench0 is None else np.asarray(wrench0, float)[self.task]
+        if not np.all(np.isfinite(f_start)):
+            raise InputError("wrench0 contains NaN or infinite values")
+        rng = np.random.default_rng(self.seed)
+        total = 0
+        best = None
+        name = self.method
+
+        def attempt(x_init, f_init, label):
+            nonlocal total
+            x, f, it, ok, st = self._iterate(x_init, f_init, p_t, r_t, self.max_iter)
+            total += it
+            if not ok:
+                # continuation from the attempt's start towards the target
+                ps, rs = self.kin.placement(x_init)
+                for nsteps in (4, 16):
+                    xc, fc, okc = x_init.copy(), f_init.copy(), True
+                    dlog = pin.log3(r_t @ rs.T)
+                    for k in range(1, nsteps + 1):
+                        a = k / nsteps
+                        pk = (1 - a) * ps + a * p_t
+                        rk = pin.exp3(a * dlog) @ rs
+                        xc, fc, itc, okc, st = self._iterate(xc, fc, pk, rk, self.max_iter)
+                        total += itc
+                        if not okc:
+                            break
+                    if okc:
+                        return self._result(xc, fc, total, True, st, p_t, r_t, f"{label}+continuation({nsteps})")
+                return self._result(x, f, total, False, st, p_t, r_t, label, with_stability=False)
+            return self._result(x, f, total, True, st, p_t, r_t, label)
+
+        # A start where the end cannot move in some constrained direction (e.g. a straight
+        # chain of rigid links) gives a singular eq. (28)/(10) matrix: perturb it first (§4.1).
+        jz0 = self.kin.evaluate(x_start, hessian=False).jacobian[self.task][:, self.free]
+        sv = np.linalg.svd(jz0, compute_uv=False)
+        if sv.size < len(self.task) or sv.min() <= 1e-9 * max(sv.max(), 1e-300):
+            x_start = self._perturb(x_start, rng)
+            name += "+perturbed-start"
+        res = attempt(x_start, f_start, name)
+        if res.converged and (res.stable or not self.follow_stable):
+            return replace(res, iterations=total)
+        best = res
+        for k in range(1, self.restarts + 1):
+            xr = self._perturb(x_start if not res.converged else res.x, rng)
+            r2 = attempt(xr, f_start if not res.converged else res.wrench[self.task], f"{name}+restart({k})")
+            if r2.converged and (r2.stable or not self.follow_stable):
+                return replace(r2, iterations=total)
+            if r2.converged and (not best.converged or r2.energy < best.energy):
+                best = r2
+        best = replace(best, iterations=total)
+        if not best.converged and raise_on_failure:
+            raise NoEquilibrium(
+                f"no equilibrium found for deflection {np.round(best.deflection, 9).tolist()} after "
+                f"{total} iterations and {self.restarts} restarts (residuals {best.residuals})",
+                best,
+                best.residual(),
+            )
+        return best
+
+    # ----------------------------------------------------------------- dual problem
+    def solve_wrench(
+        self,
+        wrench,
+        *,
+        x0: np.ndarray | None = None,
+        max_outer: int = 50,
+        method: str = "eq30",
+        raise_on_failure: bool = True,
+    ) -> EquilibriumResult:
+        """Equilibrium for a prescribed external wrench (the dual problem, eq. 11).
+
+        Outer loop ``t_{i+1} = t_i + K_i⁻¹ (F − F_i)`` around the displacement-driven
+        solve, with step halving when the wrench error grows. Meaningful only where the
+        stiffness ``K_i`` is non-singular: a single serial chain with passive joints has
+        a singular stiffness (its passive joints let the end move freely along some
+        direction), and :class:`SingularStiffness` says so.
+
+        Args:
+            wrench: (6,) force (N) at the end frame origin and moment (N·m), world axes;
+                components outside the task must be zero.
+        """
+        vm = self.vm
+        w = np.asarray(wrench, dtype=float).ravel()
+        if w.size == 3:
+            w = np.concatenate([w, np.zeros(3)])
+        if w.size != 6 or not np.all(np.isfinite(w)):
+            raise InputError(f"wrench must be 3 or 6 finite numbers (N, N·m), got {np.asarray(wrench).tolist()}")
+        free_comp = [i for i in range(6) if i not in self.task]
+        if np.any(np.abs(w[free_comp]) > 0):
+            names = ["x", "y", "z", "rx", "ry", "rz"]
+            raise InputError(
+                f"wrench components {[names[i] for i in free_comp if w[i] != 0]} act on unconstrained task "
+                f"directions (task is {vm.task_names}): they cannot be balanced"
+            )
+        ft = w[self.task]
+        res = self.solve(np.zeros(6), x0=x0)
+        total = res.iterations
+        fscale = max(float(np.abs(ft).max()), 1e-300)
+        for outer in range(max_outer):
+            err = ft - res.wrench[self.task]
+            if np.abs(err).max() <= max(self.tol * 100 * fscale, 1e-12 * self.kscale):
+                return replace(res, iterations=total, path=res.path + f"+eq11({outer})")
+            b = evaluate_blocks(vm, self.kin, res.x, res.wrench)
+            try:
+                k = stiffness_from_blocks(b, vm.task, method).task_stiffness
+            except SingularStiffness as e:
+                raise SingularStiffness(f"wrench-driven equilibrium (eq. 11) impossible: {e}", e.eigenvalues) from None
+            ev = np.linalg.eigvals(0.5 * (k + k.T)).real
+            if np.abs(ev).min() <= 1e-9 * np.abs(ev).max():
+                raise SingularStiffness(
+                    "wrench-driven equilibrium (eq. 11) impossible: the Cartesian stiffness is singular "
+                    f"(eigenvalues {np.round(np.sort(ev), 6).tolist()}); passive joints let the end move freely "
+                    "along some direction, so a wrench there has no equilibrium. Prescribe a deflection instead.",
+                    ev,
+                )
+            dt_task = np.linalg.solve(k, err)
+            step = 1.0
+            for _ in range(30):
+                dt = np.zeros(6)
+                dt[self.task] = step * dt_task
+                p_n, r_n = displace(res.position, res.rotation, dt)
+                try:
+                    rn = self.solve(target=(p_n, r_n), x0=res.x, wrench0=res.wrench)
+                    total += rn.iterations
+                except NoEquilibrium:
+                    rn = None
+                if rn is not None and np.abs(ft - rn.wrench[self.task]).max() < np.abs(err).max():
+                    break
+                step *= 0.5
+            else:
+                rn = None
+            if rn is None:
+                break
+            res = rn
+        res = replace(res, iterations=total, converged=False, path=res.path + "+eq11")
+        if raise_on_failure:
+            raise NoEquilibrium(
+                f"wrench-driven equilibrium (eq. 11) did not converge: wrench error "
+                f"{np.abs(ft - res.wrench[self.task]).max():.3g} after {max_outer} outer iterations",
+                res,
+                float(np.abs(ft - res.wrench[self.task]).max()),
+            )
+        return res
+
+
+def solve_equilibrium(vm: VjmModel, deflection=None, *, target=None, **kwargs) -> EquilibriumResult:
+    """Convenience: :meth:`EquilibriumSolver.solve` with a fresh solver.
+
+    Solver options (``method``, ``tol``, ``max_iter``, ``restarts``, ``seed``, ...) and
+    ``x0``/``wrench0``/``raise_on_failure`` may be passed as keywords."""
+    call = {k: kwargs.pop(k) for k in ("x0", "wrench0", "raise_on_failure") if k in kwargs}
+    return EquilibriumSolver(vm, **kwargs).solve(deflection, target=target, **call)
+
+
+def solve_for_wrench(vm: VjmModel, wrench, **kwargs) -> EquilibriumResult:
+    """Convenience: :meth:`EquilibriumSolver.solve_wrench` with a fresh solver (eq. 11)."""
+    call = {k: kwargs.pop(k) for k in ("x0", "max_outer", "raise_on_failure") if k in kwargs}
+    return EquilibriumSolver(vm, **kwargs).solve_wrench(wrench, **call)

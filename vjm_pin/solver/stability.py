@@ -1,0 +1,82 @@
+"""Stability of a loaded equilibrium (paper §4.2, eq. 19–23)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .blocks import Blocks
+
+#: Relative tolerance on the eigenvalues of the reduced matrix of eq. (23): the
+#: equilibrium is stable when every eigenvalue is below ``-STABILITY_TOL · ‖K_θ‖₂``.
+STABILITY_TOL = 1e-10
+#: Relative tolerance on the singular values of ``[J_θ J_q]`` that defines its rank (eq. 20).
+RANK_TOL = 1e-10
+
+
+@dataclass(frozen=True)
+class StabilityResult:
+    """Verdict of eq. (23).
+
+    Attributes:
+        stable: True when the reduced matrix is negative definite (energy minimum for the
+            fixed end location).
+        eigenvalues: (d,) eigenvalues of the symmetric part of the reduced matrix, ascending
+            (N·m/rad for rotational coordinates). d = null-space dimension.
+        null_dim: Dimension of the null space of ``[J_θ J_q]`` (eq. 21).
+        tolerance: Absolute threshold used: stable iff ``max(eigenvalues) < -tolerance``.
+    """
+
+    stable: bool
+    eigenvalues: np.ndarray
+    null_dim: int
+    tolerance: float
+
+    @property
+    def margin(self) -> float:
+        """``-max(eigenvalues)``: positive when stable; the distance to instability."""
+        return float(-self.eigenvalues.max()) if self.eigenvalues.size else float("inf")
+
+
+def null_space(J_theta: np.ndarray, J_q: np.ndarray, rank_tol: float = RANK_TOL) -> np.ndarray:
+    """Orthonormal basis (nθ+nq, d) of the null space of ``[J_θ J_q]`` by SVD (eq. 20–21).
+
+    Rows are ordered (θ, q): the first nθ rows are ``V_θ°``, the rest ``V_q°``.
+    """
+    a = np.hstack([J_theta, J_q])
+    n = a.shape[1]
+    if a.shape[0] == 0:
+        return np.eye(n)
+    _, s, vt = np.linalg.svd(a, full_matrices=True)
+    smax = s.max() if s.size else 0.0
+    rank = int(np.sum(s > rank_tol * max(smax, 1e-300)))
+    return vt[rank:].T.copy()
+
+
+def reduced_matrix(b: Blocks, basis: np.ndarray | None = None) -> np.ndarray:
+    """The matrix of eq. (23): ``Vᵀ [[H_θθ − K_θ, H_θq], [H_qθ, H_qq]] V`` (symmetric part)."""
+    if basis is None:
+        basis = null_space(b.J_theta, b.J_q)
+    big = np.block([[b.H_tt - b.K_theta, b.H_tq], [b.H_qt, b.H_qq]])
+    m = basis.T @ big @ basis
+    return 0.5 * (m + m.T)
+
+
+def check_stability(b: Blocks, tol: float = STABILITY_TOL) -> StabilityResult:
+    """Stability of the equilibrium whose matrices are ``b`` (eq. 19–23).
+
+    The virtual work (eq. 17–18) of joint displacements that keep the end fixed
+    (eq. 19) is a quadratic form on the null space of ``[J_θ J_q]``; the equilibrium is
+    stable iff its matrix (eq. 23) is negative definite. A moment in the wrench makes the
+    Hessian blocks non-symmetric (dead moment, see :mod:`vjm_pin.kinematics`); the
+    quadratic form only sees the symmetric part. The threshold is relative:
+    ``tol · ‖K_θ‖₂``.
+    """
+    basis = null_space(b.J_theta, b.J_q)
+    m = reduced_matrix(b, basis)
+    ev = np.linalg.eigvalsh(m) if m.size else np.zeros(0)
+    scale = np.linalg.norm(b.K_theta, 2) if b.K_theta.size else 1.0
+    thr = tol * scale
+    stable = bool(ev.size == 0 or ev.max() < -thr)
+    return StabilityResult(stable, ev, basis.shape[1], float(thr))

@@ -1,0 +1,205 @@
+"""Loaded Cartesian stiffness and the sensitivities K_q, K_θ (paper §5, eq. 28–33)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..exceptions import SingularStiffness
+from .blocks import Blocks
+from .stability import RANK_TOL
+
+METHODS = ("eq30", "eq32", "eq33")
+#: Reciprocal condition number below which a matrix to invert is treated as singular.
+SINGULAR_RCOND = 1e-13
+
+
+@dataclass(frozen=True)
+class StiffnessResult:
+    """Linearisation ``δF = K_C δt``, ``δq = K_q δt``, ``δθ = K_θ δt`` (eq. 29).
+
+    Attributes:
+        stiffness: (6, 6) loaded Cartesian stiffness K_C at the end frame, world axes, for
+            ``δt = (δp, δφ)`` (m, world rotation vector rad) and ``δF = (force N, moment
+            N·m about the frame origin)``; rows/columns of unconstrained task components
+            are zero.
+        dq_dt: (nq, 6) K_q: passive-joint sensitivity (rad/m, …).
+        dtheta_dt: (nθ, 6) K_θ: spring-coordinate sensitivity.
+        method: ``"eq30"``, ``"eq32"`` or ``"eq33"``.
+        task: Constrained task component indices.
+    """
+
+    stiffness: np.ndarray
+    dq_dt: np.ndarray
+    dtheta_dt: np.ndarray
+    method: str
+    task: tuple[int, ...]
+
+    def is_symmetric(self, rtol: float = 1e-8) -> bool:
+        """Symmetric to ``rtol`` (relative to the largest entry). Loaded by a pure force the
+        stiffness is symmetric; a moment (dead load) may make it non-symmetric."""
+        k = self.stiffness
+        return bool(np.abs(k - k.T).max() <= rtol * max(np.abs(k).max(), 1e-300))
+
+    @property
+    def task_stiffness(self) -> np.ndarray:
+        """(m, m) K_C restricted to the constrained task components."""
+        t = list(self.task)
+        return self.stiffness[np.ix_(t, t)]
+
+
+def _equilibrate(a: np.ndarray, sweeps: int = 4) -> np.ndarray:
+    """Symmetric Ruiz scaling ``D A D`` (rows and columns to unit max-norm): VJM matrices
+    mix axial link stiffness (~1e9) with Jacobian entries (~1), so conditioning must be
+    judged on the scaled matrix."""
+    d = np.ones(a.shape[0])
+    s = a.copy()
+    for _ in range(sweeps):
+        r = np.sqrt(np.maximum(np.abs(s).max(axis=1), np.abs(s).max(axis=0)))
+        r[r == 0] = 1.0
+        s = s / r[:, None] / r[None, :]
+        d /= r
+    return s
+
+
+def _rcond(a: np.ndarray) -> float:
+    """Reciprocal 2-norm condition number of the equilibrated matrix (0 when singular)."""
+    if a.size == 0:
+        return 1.0
+    s = np.linalg.svd(_equilibrate(a), compute_uv=False)
+    return float(s.min() / s.max()) if s.max() > 0 else 0.0
+
+
+def _diagnose(b: Blocks, what: str) -> str:
+    m = b.J_theta.shape[0]
+    jall = np.hstack([b.J_theta, b.J_q])
+    s = np.linalg.svd(jall, compute_uv=False) if jall.size else np.zeros(0)
+    rank = int(np.sum(s > RANK_TOL * max(s.max() if s.size else 0.0, 1e-300)))
+    if rank < m:
+        u = np.linalg.svd(jall)[0][:, -1]
+        return (
+            f"{what} is singular: the end frame cannot move along task direction {np.round(u, 3).tolist()} "
+            "to first order (a rigid direction, e.g. a straight chain of rigid links): the stiffness there is infinite"
+        )
+    if b.J_q.size:
+        sq = np.linalg.svd(b.J_q, compute_uv=False)
+        if sq.min() <= RANK_TOL * max(sq.max(), 1e-300):
+            return f"{what} is singular: the passive joints are redundant (some passive motion does not move the end frame)"
+    return f"{what} is singular: the equilibrium is at a critical point (bifurcation/buckling) of the loaded chain"
+
+
+def _embed(vm_task, kc, kq, kt, method) -> StiffnessResult:
+    task = list(vm_task)
+    k6 = np.zeros((6, 6))
+    k6[np.ix_(task, task)] = kc
+    q6 = np.zeros((kq.shape[0], 6))
+    q6[:, task] = kq
+    t6 = np.zeros((kt.shape[0], 6))
+    t6[:, task] = kt
+    return StiffnessResult(k6, q6, t6, method, tuple(vm_task))
+
+
+def eq28_matrix(b: Blocks) -> np.ndarray:
+    """The matrix of eq. (28): ``[[0, J_q, J_θ], [J_qᵀ, H_qq, H_qθ], [J_θᵀ, H_θq, H_θθ − K_θ]]``."""
+    m = b.J_theta.shape[0]
+    return np.block(
+        [
+            [np.zeros((m, m)), b.J_q, b.J_theta],
+            [b.J_q.T, b.H_qq, b.H_qt],
+            [b.J_theta.T, b.H_tq, b.H_tt - b.K_theta],
+        ]
+    )
+
+
+def stiffness_eq30(b: Blocks, task=(0, 1, 2, 3, 4, 5)) -> StiffnessResult:
+    """K_C, K_q, K_θ by the full inverse of the matrix of eq. (28) (eq. 30).
+
+    Works with passive joints (K_C rank-deficient: a passive motion of the end gives
+    zero stiffness) and reduced task spaces (only the constrained rows enter J). The
+    matrix itself is invertible as long as the end can move in every constrained
+    direction and the passive joints are independent; otherwise
+    :class:`SingularStiffness` says which.
+    """
+    a = eq28_matrix(b)
+    if _rcond(a) < SINGULAR_RCOND:
+        raise SingularStiffness(_diagnose(b, "the matrix of eq. (28)"), np.linalg.svd(a, compute_uv=False))
+    m, nq = b.J_theta.shape[0], b.J_q.shape[1]
+    rhs = np.zeros((a.shape[0], m))
+    rhs[:m] = np.eye(m)
+    x = np.linalg.solve(a, rhs)
+    return _embed(task, x[:m], x[m : m + nq], x[m + nq :], "eq30")
+
+
+def _reduced(b: Blocks):
+    kf = b.K_theta - b.H_tt
+    if _rcond(kf) < SINGULAR_RCOND:
+        raise SingularStiffness(
+            "K_θ − H_θθ is singular (eq. 31): the springs alone have a zero-stiffness mode under this load; use eq. (30)",
+            np.linalg.eigvals(kf),
+        )
+    k = np.linalg.inv(kf)  # k_θ^F
+    a11 = b.J_theta @ k @ b.J_theta.T
+    a12 = b.J_q + b.J_theta @ k @ b.H_tq
+    a21 = b.J_q.T + b.H_qt @ k @ b.J_theta.T
+    a22 = b.H_qq + b.H_qt @ k @ b.H_tq
+    return k, a11, a12, a21, a22
+
+
+def stiffness_eq32(b: Blocks, task=(0, 1, 2, 3, 4, 5)) -> StiffnessResult:
+    """K_C and K_q by inverting the reduced (m+nq) matrix of eq. (31)–(32); δθ eliminated
+    with ``k_θ^F = (K_θ − H_θθ)⁻¹``, and ``K_θ = k_θ^F (J_θᵀ K_C + H_θq K_q)``."""
+    k, a11, a12, a21, a22 = _reduced(b)
+    big = np.block([[a11, a12], [a21, a22]])
+    if _rcond(big) < SINGULAR_RCOND:
+        raise SingularStiffness(_diagnose(b, "the matrix of eq. (32)"), np.linalg.svd(big, compute_uv=False))
+    m = a11.shape[0]
+    rhs = np.zeros((big.shape[0], m))
+    rhs[:m] = np.eye(m)
+    x = np.linalg.solve(big, rhs)
+    kc, kq = x[:m], x[m:]
+    kt = k @ (b.J_theta.T @ kc + b.H_tq @ kq)
+    return _embed(task, kc, kq, kt, "eq32")
+
+
+def stiffness_eq33(b: Blocks, task=(0, 1, 2, 3, 4, 5)) -> StiffnessResult:
+    """K_C by the block (Frobenius) closed form of eq. (33)::
+
+        K_C = A⁻¹ + A⁻¹ B S⁻¹ C A⁻¹,  A = J_θ k J_θᵀ,  B = J_q + J_θ k H_θq,
+        C = J_qᵀ + H_qθ k J_θᵀ,  S = H_qq + H_qθ k H_θq − C A⁻¹ B,
+
+    whose first term is the classical stiffness of a chain without passive joints. It
+    needs ``A`` invertible: every constrained direction must be reachable by the springs
+    alone (not only through passive joints). ``K_q = −S⁻¹ C A⁻¹``.
+    """
+    k, a, bb, c, d = _reduced(b)
+    if _rcond(a) < SINGULAR_RCOND:
+        raise SingularStiffness(
+            "J_θ k_θ^F J_θᵀ is singular (eq. 33): the springs alone cannot move the end in some "
+            "constrained direction; use eq. (30)",
+            np.linalg.svd(a, compute_uv=False),
+        )
+    ai = np.linalg.inv(a)
+    if bb.shape[1]:
+        s = d - c @ ai @ bb
+        if _rcond(s) < SINGULAR_RCOND:
+            raise SingularStiffness(_diagnose(b, "the Schur complement of eq. (33)"), np.linalg.svd(s, compute_uv=False))
+        si = np.linalg.inv(s)
+        kc = ai + ai @ bb @ si @ c @ ai
+        kq = -si @ c @ ai
+    else:
+        kc = ai
+        kq = np.zeros((0, a.shape[0]))
+    kt = k @ (b.J_theta.T @ kc + b.H_tq @ kq)
+    return _embed(task, kc, kq, kt, "eq33")
+
+
+def stiffness_from_blocks(b: Blocks, task=(0, 1, 2, 3, 4, 5), method: str = "eq30") -> StiffnessResult:
+    """Dispatch to :func:`stiffness_eq30`, :func:`stiffness_eq32` or :func:`stiffness_eq33`."""
+    if method == "eq30":
+        return stiffness_eq30(b, task)
+    if method == "eq32":
+        return stiffness_eq32(b, task)
+    if method == "eq33":
+        return stiffness_eq33(b, task)
+    raise ValueError(f"unknown stiffness method '{method}'; choose one of {METHODS}")
