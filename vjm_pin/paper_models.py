@@ -19,6 +19,13 @@ from .generator import generate_vjm
 
 POSTURES = {"s": (0.0, 0.0), "pi": (-30.0, -30.0), "z": (30.0, -30.0)}
 
+#: Link beams of Models B and C (§6.1.4–6.1.5): rectangle a = 0.02 L (along z) ×
+#: b = 0.05 L (along y), ν = 0.3, L = 1 m. E is chosen so that the z-bending coefficient
+#: E·I_z/L equals 1 N·m/rad (I_z = a b³/12): forces then read in units of E·I_z/L².
+#: (How this relates to the paper's Kθ is studied in the reproduction report.)
+PAPER_A, PAPER_B = 0.02, 0.05
+PAPER_BEAM = {"section": "rectangle", "a": PAPER_A, "b": PAPER_B, "E": 12.0 / (PAPER_A * PAPER_B**3), "nu": 0.3}
+
 
 def base_angle(qa1: float, qa2: float) -> float:
     """Base rotation (rad) that puts the end of the chain on the x axis (rad inputs)."""
