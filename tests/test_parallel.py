@@ -18,9 +18,9 @@ def _f(v):
     return " ".join(repr(float(x)) for x in v)
 
 
-def _leg_xml(rng, name, axis, base_xyz, passive_axis=None, k6=None, rpy=(0, 0, 0), k_act=5e5):
+def _leg_xml(rng, name, axis, base_xyz, passive_axes=(), k6=None, rpy=(0, 0, 0), k_act=5e5):
     """A leg: prismatic actuator along ``axis`` (spring k_act N/m), a 6-D link spring (SPD k6),
-    optionally a passive revolute about ``passive_axis``, an end link ``<name>_end``."""
+    passive revolutes about ``passive_axes``, an end link ``<name>_end``."""
     k6 = random_spd(rng, 6, 1e4, 1e5) if k6 is None else k6
     j = []
     j.append(f'<link name="{name}_l1"/>')
@@ -50,15 +50,16 @@ def _leg_xml(rng, name, axis, base_xyz, passive_axis=None, k6=None, rpy=(0, 0, 0
         f'<vjm:spring name="{name}_link" link="{name}_l1" joints="{" ".join(sj)}">'
         f"<vjm:stiffness>{_f(k6.ravel())}</vjm:stiffness></vjm:spring>"
     )
-    if passive_axis is not None:
-        j.append(f'<link name="{name}_p"/>')
+    for k, pax in enumerate(passive_axes):
+        pn = f"{name}_pas{k}"
+        j.append(f'<link name="{pn}"/>')
         j.append(
-            f'<joint name="{name}_pas" type="revolute"><parent link="{prev}"/><child link="{name}_p"/>'
-            f'<origin xyz="0.1 0 0.02" rpy="0.2 0 0"/><axis xyz="{_f(passive_axis)}"/>'
+            f'<joint name="{pn}" type="revolute"><parent link="{prev}"/><child link="{pn}"/>'
+            f'<origin xyz="0.1 0 0.02" rpy="0.2 0 0"/><axis xyz="{_f(pax)}"/>'
             f'<limit lower="-3" upper="3" effort="1" velocity="1"/></joint>'
         )
-        tags.append(f'<vjm:joint name="{name}_pas" role="passive" position="0"/>')
-        prev = f"{name}_p"
+        tags.append(f'<vjm:joint name="{pn}" role="passive" position="0"/>')
+        prev = pn
     j.append(f'<link name="{name}_end"/>')
     j.append(
         f'<joint name="{name}_endj" type="fixed"><parent link="{prev}"/><child link="{name}_end"/>'
@@ -83,7 +84,7 @@ def robot_urdf(seed=0, n_legs=3, passive=True, identical=False, platform=(0.6, 0
             name,
             a,
             base,
-            passive_axis=(axes[i % 3] if passive else None),
+            passive_axes=[axes[(i + k) % 3] for k in range(int(passive))],
             k6=k6,
             rpy=rpy,
         )
@@ -131,15 +132,16 @@ def test_two_identical_legs_give_twice_the_stiffness():
     )
 
 
-def test_rank_deficient_legs_sum_to_full_rank():
-    rs = RobotSolver(load_parallel(robot_urdf(1)))
+@pytest.mark.parametrize("n_passive", [1, 2])
+def test_rank_deficient_legs_sum_to_full_rank(n_passive):
+    """Legs with 1 (2) passive revolutes have rank-5 (rank-4, the Orthoglide's case) stiffness;
+    three legs with differently oriented passive axes give a full-rank robot stiffness."""
+    rs = RobotSolver(load_parallel(robot_urdf(1, passive=n_passive)))
     eq = rs.solve(np.zeros(6))
     ks = rs.leg_stiffnesses(eq)
     for name, k in ks.items():
         ev = np.linalg.eigvalsh(0.5 * (k + k.T))
-        assert np.sum(ev > 1e-8 * ev.max()) == 5, (
-            f"leg {name}: a passive revolute leaves rank 5, eigenvalues {ev}"
-        )
+        assert np.sum(ev > 1e-8 * ev.max()) == 6 - n_passive, f"leg {name}: eigenvalues {ev}"
     kc = rs.stiffness(eq)
     ev = np.linalg.eigvalsh(0.5 * (kc + kc.T))
     assert ev.min() > 1e-6 * ev.max(), f"robot stiffness should be full rank, eigenvalues {ev}"
