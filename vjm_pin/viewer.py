@@ -97,7 +97,9 @@ __all__ = [
     "UNSTABLE_COLOR",
     "Animation",
     "chain_geometry",
+    "default_scale",
     "export_html",
+    "magnify",
     "serve",
 ]
 
@@ -1037,3 +1039,70 @@ def serve(
     if open_browser:
         vis.open()
     return vis.url()
+
+
+# ============================================================================ magnification
+def magnify(reference: np.ndarray, x: np.ndarray, scale: float) -> np.ndarray:
+    """Configuration shown for ``x`` with its deformation magnified ``scale`` times.
+
+    ``reference + scale · (x − reference)``: with ``reference`` the unloaded configuration
+    (spring coordinates at their rest values θ₀, passive joints at their unloaded values,
+    actuators at their commands), this multiplies the spring deflections θ − θ₀ and the
+    passive joints' motion by ``scale``; joints that did not move stay put. Vectors (nq,),
+    m and rad.
+    """
+    ref = np.asarray(reference, dtype=float)
+    x = np.asarray(x, dtype=float)
+    if ref.shape != x.shape:
+        raise InputError(f"configuration has shape {x.shape}, reference has {ref.shape}")
+    if not (math.isfinite(scale) and scale > 0):
+        raise InputError(f"deformation scale must be a positive finite number, got {scale}")
+    return ref + float(scale) * (x - ref)
+
+
+def _joint_points(model: pin.Model, data: pin.Data, q: np.ndarray) -> np.ndarray:
+    pin.forwardKinematics(model, data, q)
+    pin.updateFramePlacements(model, data)
+    pts = [data.oMi[j].translation for j in range(1, model.njoints)]
+    pts += [f.translation for f in data.oMf]
+    return np.array(pts)
+
+
+def default_scale(
+    model: pin.Model,
+    reference: np.ndarray,
+    frames: Sequence[np.ndarray],
+    *,
+    visible_fraction: float = 0.08,
+    max_scale: float = 1e4,
+) -> float:
+    """Deformation magnification that makes the largest displacement visible.
+
+    The largest displacement of any joint origin or frame, over all ``frames``, from its
+    unloaded position (``reference``) is compared with the size of the unloaded robot (the
+    diagonal of the bounding box of its joint origins and frames, m). If it is below
+    ``visible_fraction`` of that size, the scale is the 1-2-5 number that brings it there
+    (at most ``max_scale``); otherwise 1 (deformations already visible are never shrunk).
+    """
+    data = model.createData()
+    ref_pts = _joint_points(model, data, np.asarray(reference, float))
+    size = float(np.linalg.norm(ref_pts.max(axis=0) - ref_pts.min(axis=0)))
+    disp = 0.0
+    for q in frames:
+        disp = max(
+            disp,
+            float(
+                np.linalg.norm(
+                    _joint_points(model, data, np.asarray(q, float)) - ref_pts, axis=1
+                ).max()
+            ),
+        )
+    if size <= _TOL or disp <= _TOL * size:
+        return 1.0
+    want = visible_fraction * size / disp
+    if want <= 1.0:
+        return 1.0
+    exp = math.floor(math.log10(want))
+    mant = want / 10**exp
+    nice = max(m for m in (1.0, 2.0, 5.0, 10.0) if m <= mant + 1e-12)
+    return float(min(nice * 10**exp, max_scale))
