@@ -16,7 +16,9 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def _paper_models():
-    spec = importlib.util.spec_from_file_location("make_paper_models", ROOT / "scripts" / "make_paper_models.py")
+    spec = importlib.util.spec_from_file_location(
+        "make_paper_models", ROOT / "scripts" / "make_paper_models.py"
+    )
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod.paper_models()
@@ -28,7 +30,9 @@ def test_committed_models_match_the_generator():
     for name, text in generated.items():
         path = ROOT / "models" / "urdf" / name
         assert path.is_file(), f"{name} missing: run scripts/make_paper_models.py"
-        assert path.read_text() == text, f"{name} differs from the generator: run scripts/make_paper_models.py"
+        assert path.read_text() == text, (
+            f"{name} differs from the generator: run scripts/make_paper_models.py"
+        )
 
 
 def test_ktheta_factor_is_the_root_of_the_buckling_polynomial():

@@ -10,6 +10,7 @@ import numpy as np
 from ..kinematics import Kinematics
 from ..model import VjmModel
 from .blocks import Blocks, evaluate_blocks, full_wrench
+from .curve import CriticalPoint, Curve, CurvePoint, trace_curve
 from .equilibrium import EquilibriumResult, EquilibriumSolver, solve_equilibrium, solve_for_wrench
 from .stability import StabilityResult, check_stability, null_space, reduced_matrix
 from .stiffness import (
@@ -40,6 +41,9 @@ def unloaded_stiffness(vm: VjmModel, method: str = "eq30", kin: Kinematics | Non
 
 __all__ = [
     "Blocks",
+    "CriticalPoint",
+    "Curve",
+    "CurvePoint",
     "EquilibriumResult",
     "EquilibriumSolver",
     "StabilityResult",
@@ -58,5 +62,6 @@ __all__ = [
     "stiffness_eq32",
     "stiffness_eq33",
     "stiffness_from_blocks",
+    "trace_curve",
     "unloaded_stiffness",
 ]
