@@ -17,7 +17,9 @@ from vjm_pin.viewer import (
     STYLE_COLORS,
     Animation,
     chain_geometry,
+    default_scale,
     export_html,
+    magnify,
 )
 
 # Three revolute joints, links of 0.4 m along x; j2 bends the chain out of the xy plane.
@@ -363,3 +365,43 @@ def test_browser_renders_animation(chain, tmp_path):
     # the two animation times give different pictures
     diff = np.abs(img[0].astype(int) - img[15].astype(int)).max(axis=2)
     assert (diff > 30).mean() > 0.01
+
+
+# ----------------------------------------------------------------------------- magnification
+def test_magnify_scales_the_deviation_from_the_reference():
+    rng = np.random.default_rng(3)
+    ref, x = rng.normal(size=7), rng.normal(size=7)
+    np.testing.assert_allclose(magnify(ref, x, 1.0), x)
+    np.testing.assert_allclose(magnify(ref, ref, 50.0), ref)
+    np.testing.assert_allclose(magnify(ref, x, 20.0) - ref, 20.0 * (x - ref))
+    # magnifying twice multiplies the scales
+    np.testing.assert_allclose(magnify(ref, magnify(ref, x, 3.0), 4.0), magnify(ref, x, 12.0))
+
+
+@pytest.mark.parametrize("scale", [0.0, -1.0, float("nan"), float("inf")])
+def test_magnify_rejects_bad_scale(scale):
+    with pytest.raises(InputError, match="scale"):
+        magnify(np.zeros(3), np.ones(3), scale)
+
+
+def test_magnify_rejects_shape_mismatch():
+    with pytest.raises(InputError, match="shape"):
+        magnify(np.zeros(3), np.ones(4), 2.0)
+
+
+def test_default_scale_brings_small_deformation_to_view(chain):
+    model, _ = chain
+    ref = np.zeros(model.nq)
+    bent = ref.copy()
+    bent[1] = 1e-4  # rad: invisible on a 1.2 m chain
+    s = default_scale(model, ref, [ref, bent])
+    assert s > 100
+    # 1-2-5 numbers only
+    mant = s / 10 ** np.floor(np.log10(s))
+    assert min(abs(mant - m) for m in (1, 2, 5)) < 1e-9
+    # the magnified tip displacement (0.8 m lever arm) is a few percent of the ~1.2 m size
+    assert 0.02 < s * 1e-4 * 0.8 / 1.2 < 0.1
+    assert default_scale(model, ref, [ref]) == 1.0  # nothing moves
+    big = ref.copy()
+    big[1] = 0.5
+    assert default_scale(model, ref, [big]) == 1.0  # visible already: never shrunk
