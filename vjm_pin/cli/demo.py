@@ -68,7 +68,7 @@ def run(args) -> int:
         vm,
         curve,
         path=html,
-        title=f"{vm.name} (Model C, S posture): buckling under end compression",
+        title=f"Model C ({vm.name}), S posture: buckling",
     )
     print(
         f"animation: {html.resolve()} ({page.frames} frames, deformation ×{page.scale:g}; open it in a browser)"
