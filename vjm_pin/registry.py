@@ -23,21 +23,71 @@ def bundled_models() -> dict[str, Path]:
     return {p.stem: p for p in sorted(d.glob("*.urdf"))} if d.is_dir() else {}
 
 
-def resolve_model(name_or_path: str) -> VjmModel:
-    """Load a VJM model from a path or the name of a bundled model.
+def is_vjm_urdf(path: Path) -> bool:
+    """Whether the file at ``path`` carries VJM tags (namespace ``urn:vjm-pin:1``)."""
+    from .model import NS
+
+    try:
+        return NS in Path(path).read_text()
+    except (OSError, UnicodeDecodeError) as e:
+        raise ModelError(f"cannot read model file {path}: {e}") from None
+
+
+def resolve(name_or_path: str, *, frame=None, q=None, pose_name=None, springs=None):
+    """Load a model from a VJM URDF, a bundled model name, a plain (rigid) URDF or the name of
+    an ``example-robot-data`` robot.
+
+    Rigid URDFs and robots get the defaults of :mod:`vjm_pin.robots` (actuator springs,
+    rigid links), optionally the spring spec ``springs``, the end ``frame``, the named SRDF
+    pose ``pose_name`` and the joint positions ``q`` ({name: rad or m}). For a VJM URDF or a
+    bundled model only ``q`` applies (:meth:`VjmModel.with_positions`).
+
+    Returns:
+        (vm, robot): the :class:`VjmModel`, and the :class:`~vjm_pin.robots.RobotModel` it was
+        built from (None for VJM URDFs and bundled models).
+
+    Raises:
+        ModelError: a missing file, or options a VJM model cannot take.
+        UnknownRobot: neither a file, a bundled model nor a robot (lists the names).
+    """
+    from .robots import UnknownRobot, build_robot, robot_names
+
+    p = Path(name_or_path)
+    vjm_path = None
+    if p.is_file():
+        if is_vjm_urdf(p):
+            vjm_path = p
+        else:
+            rm = build_robot(p, frame=frame, q=q, pose_name=pose_name, springs=springs)
+            return rm.vm, rm
+    elif p.suffix == ".urdf":
+        raise ModelError(f"model file not found: {p}")
+    else:
+        models = bundled_models()
+        if name_or_path in models:
+            vjm_path = models[name_or_path]
+        elif name_or_path in robot_names():
+            rm = build_robot(name_or_path, frame=frame, q=q, pose_name=pose_name, springs=springs)
+            return rm.vm, rm
+        else:
+            raise UnknownRobot(name_or_path, list(models) + robot_names())
+    given = [k for k, v in (("--frame", frame), ("--pose-name", pose_name), ("--springs", springs)) if v is not None]
+    if given:
+        raise ModelError(
+            f"{', '.join(given)} apply to rigid URDFs and robots; '{name_or_path}' is a VJM model "
+            "whose frame and springs are in its tags"
+        )
+    vm = load_vjm(vjm_path)
+    if q:
+        vm = vm.with_positions(q)
+    return vm, None
+
+
+def resolve_model(name_or_path: str, **robot_options) -> VjmModel:
+    """Load a VJM model from a path or a name (see :func:`resolve`; options: ``frame``,
+    ``q``, ``pose_name``, ``springs``).
 
     Raises:
         ModelError: neither a file nor a known model name (the message lists the names).
     """
-    p = Path(name_or_path)
-    if p.suffix == ".urdf" or p.is_file():
-        if not p.is_file():
-            raise ModelError(f"model file not found: {p}")
-        return load_vjm(p)
-    models = bundled_models()
-    if name_or_path in models:
-        return load_vjm(models[name_or_path])
-    raise ModelError(
-        f"unknown model '{name_or_path}': not a file and not a bundled model "
-        f"({', '.join(models) or 'none found in ' + str(models_dir())})"
-    )
+    return resolve(name_or_path, **robot_options)[0]
