@@ -54,14 +54,20 @@ def run(args) -> int:
         print("no critical point on this path")
     png = out / "curve.png"
     try:
-        from ..plots import plot_curve
+        from ..plots import save_curve_plot
     except ModuleNotFoundError as e:
         if e.name != "vjm_pin.plots":
             raise
-        plot_curve = None
         print("plot: skipped (vjm_pin.plots is not available)")
-    if plot_curve is not None:
-        plot_curve(curve, png)
+    else:
+        save_curve_plot(
+            curve,
+            png,
+            title=f"Model C ({vm.name}), S posture: force-deflection under end compression",
+            deflection_unit=1e-3,
+            deflection_label="end deflection along -x [mm]",
+            force_label="compressive force [N]",
+        )
         print(f"plot:      {png.resolve()}")
     html = out / "curve.html"
     page = curve_page(
