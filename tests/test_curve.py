@@ -188,3 +188,133 @@ def test_progress_callback_and_point_fields():
 def test_bad_input(kwargs, match):
     with pytest.raises(InputError, match=match):
         trace_curve(resolve_model("paper-a-s"), **kwargs)
+
+
+# --------------------------------------------------------------------------- subdivision
+def test_subdivision_converges_to_euler():
+    """Model C, S posture, links split into k sub-links: the VJM error is O(1/k²), so the
+    Richardson limit (4F₄ − F₂)/3 must match Euler's pinned–pinned column of length 3L
+    bending about y, π²EI_y/(3L)², within 2 %; k = 1 is the (√21−3)EI_y/L² chain."""
+    from vjm_pin.registry import bundled_models
+    from vjm_pin.subdivide import subdivide_model
+
+    b = PAPER_BEAM
+    ei_y = b["E"] * b["b"] * b["a"] ** 3 / 12
+    euler = np.pi**2 * ei_y / (3 * L) ** 2
+    f = {}
+    for k in (2, 4):
+        vm = subdivide_model(bundled_models()["paper-c-s"], k)
+        assert vm.n_theta == 18 * k
+        f[k] = (
+            trace_curve(vm, [-1, 0, 0], 1.5 * euler / (b["E"] * b["a"] * b["b"] / (3 * L)), steps=2)
+            .critical[0]
+            .force
+        )
+    assert euler < f[4] < f[2]  # VJM with lumped springs is stiffer than the continuum
+    assert (f[2] - euler) / (f[4] - euler) == pytest.approx(4, rel=0.1)  # second order
+    assert abs((4 * f[4] - f[2]) / 3 - euler) / euler < 0.02
+
+
+def test_subdivide_matches_generator_and_rejects_bad_input(tmp_path):
+    from vjm_pin.exceptions import ModelError, SpecError
+    from vjm_pin.model import load_vjm
+    from vjm_pin.paper_models import paper_model_urdf
+    from vjm_pin.registry import bundled_models
+    from vjm_pin.subdivide import subdivide_vjm
+
+    text = subdivide_vjm(bundled_models()["paper-b-z"], 3)
+    a = load_vjm(text)
+    g = load_vjm(paper_model_urdf("b", "z", beam=PAPER_BEAM, subdivide=3))
+    assert a.joint_names == g.joint_names
+    assert np.allclose(a.K_theta, g.K_theta, rtol=1e-12)
+    assert np.allclose(a.reference, g.reference)
+    with pytest.raises(SpecError, match="positive integer"):
+        subdivide_vjm(bundled_models()["paper-b-z"], 0)
+    with pytest.raises(ModelError, match="already subdivided"):
+        subdivide_vjm(text, 2)
+    with pytest.raises(ModelError, match="no link spring"):
+        subdivide_vjm(bundled_models()["paper-a-s"], 2)
+
+
+# --------------------------------------------------------------------------- CLI
+def test_cli_curve_json_and_plot(tmp_path, capsys):
+    import json
+
+    from vjm_pin.cli import main
+
+    out = tmp_path / "c.png"
+    rc = main(
+        [
+            "curve",
+            "paper-a-s",
+            "--direction",
+            "-1",
+            "0",
+            "0",
+            "--max-deflection",
+            "0.5",
+            "--steps",
+            "5",
+            "--json",
+            "--plot",
+            str(out),
+            "--all-branches",
+        ]
+    )
+    assert rc == 0
+    data = json.loads(capsys.readouterr().out)
+    assert set(data) >= {"points", "critical", "branches"}
+    assert len(data["points"]) == 6
+    assert set(data["points"][1]) >= {"deflection", "force", "wrench", "stable", "stiffness"}
+    (c,) = data["critical"]
+    assert set(c) >= {"force", "deflection", "stiffness_before", "stiffness_after"}
+    assert abs(c["force"] - 1.0) < 1e-4
+    p = data["points"][3]
+    assert abs(p["force"] - f_stable(p["deflection"])) < 1e-6
+    assert out.stat().st_size > 1000 and out.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_cli_curve_text_subdivide_and_errors(capsys):
+    from vjm_pin.cli import main
+
+    assert (
+        main(
+            [
+                "curve",
+                "paper-c-s",
+                "--direction",
+                "-1",
+                "0",
+                "0",
+                "--max-deflection",
+                "0.001",
+                "--steps",
+                "2",
+                "--subdivide",
+                "2",
+            ]
+        )
+        == 0
+    )
+    out = capsys.readouterr().out
+    assert "critical point: force" in out
+    assert main(["curve", "paper-a-s", "--direction", "0", "0", "1", "--max-deflection", "1"]) == 2
+    assert "outside the task" in capsys.readouterr().err
+    assert (
+        main(
+            [
+                "curve",
+                "paper-a-s",
+                "--direction",
+                "-1",
+                "0",
+                "0",
+                "--max-deflection",
+                "1",
+                "--subdivide",
+                "2",
+            ]
+        )
+        == 2
+    )
+    assert "no link spring" in capsys.readouterr().err

@@ -1,0 +1,183 @@
+"""``vjm-pin curve``: force–deflection curve and buckling (critical points) of a model."""
+
+from __future__ import annotations
+
+import sys
+
+
+def add_parser(sub):
+    p = sub.add_parser(
+        "curve",
+        help="force–deflection curve along a direction, with buckling detection",
+        description=(
+            "Trace the loaded equilibrium of MODEL (eq. 5) while its end moves step by step along "
+            "DIRECTION up to --max-deflection (continuation; perturbed restarts follow the stable "
+            "branch), check the stability of every point (eq. 23), and locate the critical points "
+            "(loss of stability, jump to another branch, or a sharp drop of the tangent stiffness) "
+            "to a relative force tolerance of 1e-4. Units: m and N (rad and N·m for a rotation). "
+            "The force is the external force along the direction that holds the end there."
+        ),
+    )
+    p.add_argument(
+        "model", metavar="MODEL", help="VJM URDF path or bundled model name (see 'vjm-pin models')"
+    )
+    p.add_argument(
+        "--direction",
+        nargs="+",
+        type=float,
+        required=True,
+        metavar="D",
+        help="DX DY DZ [RX RY RZ]: direction of the end deflection, world axes (normalised)",
+    )
+    p.add_argument(
+        "--max-deflection",
+        type=float,
+        required=True,
+        metavar="D",
+        help="final deflection (m or rad)",
+    )
+    p.add_argument("--steps", type=int, default=100, help="number of steps (default 100)")
+    p.add_argument(
+        "--all-branches", action="store_true", help="also trace the unstable branches (Fig. 4)"
+    )
+    p.add_argument(
+        "--subdivide",
+        type=int,
+        default=1,
+        metavar="K",
+        help="split every beam link into K sub-links (models whose springs keep <vjm:beam>)",
+    )
+    p.add_argument(
+        "--refine-tol", type=float, default=1e-4, help="relative force tolerance of critical points"
+    )
+    p.add_argument(
+        "--json", action="store_true", help="one JSON object {points, critical, branches} on stdout"
+    )
+    p.add_argument("--plot", metavar="OUT.png", help="write a force–deflection plot (PNG)")
+    p.set_defaults(func=run)
+
+
+def load_model(name: str, subdivide: int = 1):
+    """Resolve ``name`` (path or bundled model) and subdivide its beam links if asked."""
+    from ..exceptions import InputError
+    from ..registry import bundled_models, resolve_model
+
+    if subdivide < 1:
+        raise InputError(f"--subdivide must be a positive integer, got {subdivide}")
+    if subdivide == 1:
+        return resolve_model(name)
+    from ..subdivide import subdivide_model
+
+    src = bundled_models().get(name, name)
+    return subdivide_model(src, subdivide)
+
+
+def point_dict(p) -> dict:
+    return {
+        "deflection": p.deflection,
+        "force": p.force,
+        "wrench": p.wrench,
+        "stable": p.stable,
+        "stiffness": p.stiffness,
+    }
+
+
+def critical_dict(c) -> dict:
+    return {
+        "force": c.force,
+        "deflection": c.deflection,
+        "stiffness_before": c.stiffness_before,
+        "stiffness_after": c.stiffness_after,
+        "index": c.index,
+        "force_after": c.force_after,
+    }
+
+
+def curve_dict(vm, curve) -> dict:
+    return {
+        "model": vm.name,
+        "direction": curve.direction,
+        "points": [point_dict(p) for p in curve.points],
+        "critical": [critical_dict(c) for c in curve.critical],
+        "branches": [[point_dict(p) for p in br] for br in curve.branches],
+    }
+
+
+def _progress_bar(total_hint: int):
+    if not sys.stderr.isatty():
+        return None, None
+    from tqdm import tqdm
+
+    bar = tqdm(total=total_hint, desc="tracing", unit="pt", file=sys.stderr, leave=False)
+
+    def cb(done, total):
+        bar.total = total
+        bar.n = done
+        bar.refresh()
+
+    return cb, bar
+
+
+def run(args) -> int:
+    import numpy as np
+
+    from ..exceptions import InputError
+    from ..solver import trace_curve
+    from .common import dump_json, finite_vector
+
+    vm = load_model(args.model, args.subdivide)
+    d = finite_vector(args.direction, "--direction")
+    if not np.isfinite(args.max_deflection):
+        raise InputError(f"--max-deflection must be finite, got {args.max_deflection}")
+    cb, bar = _progress_bar(args.steps + 1)
+    try:
+        curve = trace_curve(
+            vm,
+            d,
+            args.max_deflection,
+            args.steps,
+            refine_tol=args.refine_tol,
+            all_branches=args.all_branches,
+            progress=cb,
+        )
+    finally:
+        if bar is not None:
+            bar.close()
+    if args.plot:
+        from ..plots import save_curve_plot
+
+        save_curve_plot(
+            curve,
+            args.plot,
+            title=f"{vm.name}: force–deflection along {np.round(curve.direction, 3).tolist()}",
+        )
+    if args.json:
+        print(dump_json(curve_dict(vm, curve)))
+        return 0
+    rot = bool(np.any(curve.direction[3:]))
+    du, fu = ("rad", "N·m") if rot else ("m", "N")
+    print(
+        f"model {vm.name}: direction {np.round(curve.direction, 4).tolist()}, {len(curve.points)} points"
+    )
+    print(
+        f"{'deflection [' + du + ']':>18} {'force [' + fu + ']':>16} {'stiffness [' + fu + '/' + du + ']':>20}  stable"
+    )
+    for p in curve.points:
+        print(
+            f"{p.deflection:18.8g} {p.force:16.8g} {p.stiffness:20.8g}  {'yes' if p.stable else 'NO'}"
+        )
+    if not curve.critical:
+        print("no critical point (no loss of stability, no sharp stiffness drop) in this range")
+    for c in curve.critical:
+        print(
+            f"critical point: force {c.force:.8g} {fu} at deflection {c.deflection:.8g} {du}; "
+            f"tangent stiffness {c.stiffness_before:.6g} -> {c.stiffness_after:.6g} {fu}/{du}"
+        )
+    for i, br in enumerate(curve.branches):
+        print(
+            f"branch {i + 1}: {len(br)} points, {'unstable' if not any(p.stable for p in br) else 'mixed'}, "
+            f"force {br[0].force:.6g} .. {br[-1].force:.6g} {fu}"
+        )
+    if args.plot:
+        print(f"plot written to {args.plot}")
+    return 0
