@@ -81,7 +81,7 @@ def test_view_curve_page(tmp_path, capsys):
     out = capsys.readouterr().out
     assert str(page) in out
     text = page.read_text(encoding="utf-8")
-    assert "CRITICAL" in text  # the label of the critical frame
+    assert "past the critical point F_cr" in text  # the label of the critical frame
     assert "UNSTABLE" not in out
 
 

@@ -163,7 +163,8 @@ def curve_page(
     )
     text += f" — deformation ×{scale:g}"
     if critical is not None:
-        labels[critical] += f" — CRITICAL (F = {abs(curve.critical[0].force):.4g} N)"
+        c = curve.critical[0]
+        labels[critical] += f" — first frame past the critical point F_cr = {abs(c.force):.4g} N at δ = {c.deflection * 1e3:.4g} mm"
     page = export_html(
         vm.model,
         geom,
