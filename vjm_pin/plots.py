@@ -26,6 +26,7 @@ def plot_curve(
     deflection_unit: float = 1.0,
     deflection_label: str | None = None,
     mark_critical: bool = True,
+    legend: bool = True,
     analytic: Sequence[tuple[str, np.ndarray, np.ndarray]] = (),
 ):
     """Draw a :class:`~vjm_pin.solver.Curve` on ``ax`` (a new figure if None); returns ``ax``.
@@ -118,10 +119,17 @@ def plot_curve(
                 fontsize=8,
                 color=color,
             )
-    ax.set_xlabel(deflection_label or f"deflection along the direction [{dunit}]")
-    ax.set_ylabel(force_label or f"force along the direction [{funit}]")
+    ax.set_xlabel(
+        deflection_label
+        if deflection_label is not None
+        else f"deflection along the direction [{dunit}]"
+    )
+    ax.set_ylabel(
+        force_label if force_label is not None else f"force along the direction [{funit}]"
+    )
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8, loc="best")
+    if legend:
+        ax.legend(fontsize=8, loc="best")
     return ax
 
 
