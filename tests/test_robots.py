@@ -261,3 +261,15 @@ def test_models_robots_lists_names(capsys):
     assert main(["models", "--robots", "--json"]) == 0
     rows = json.loads(capsys.readouterr().out)["robots"]
     assert "ur5" in rows and rows["ur5"]["urdf"].endswith("ur5_robot.urdf")
+
+
+def test_spec_file_sets_frame_and_actuator_stiffness(tmp_path, capsys):
+    spec = tmp_path / "s.yaml"
+    spec.write_text("frame: forearm_link\nactuators: {default: 2.0e4, elbow_joint: 5.0e4}\n")
+    vm = build_robot("ur5", springs=str(spec)).vm
+    assert vm.frame == "forearm_link" and vm.n_theta == 3  # joints beyond the frame are locked
+    k = dict(zip(vm.theta_names, np.diag(vm.K_theta)))
+    assert k == {"shoulder_pan_joint": 2.0e4, "shoulder_lift_joint": 2.0e4, "elbow_joint": 5.0e4}
+    assert main(["analyze", "ur5", "--springs", str(spec), "--frame", "tool0", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["frame"] == "tool0" and len(out["theta"]) == 6

@@ -476,6 +476,11 @@ def build_robot(
     user_q = dict(q or {})
     check_pose(tree, user_q)
     pose.update(user_q)
+    spec_data = None
+    if springs is not None:
+        spec_data = dict(springs) if isinstance(springs, dict) else _read_spec(springs)
+    if frame is None and spec_data and spec_data.get("frame"):
+        frame = str(spec_data["frame"])  # the spec's end frame when --frame is not given
     if frame is None:
         frame = default_frame(text, src.srdf)
     elif frame not in tree.links:
@@ -490,13 +495,7 @@ def build_robot(
         if nudged is not pose:
             used = f"{used or 'zeros'}+{SINGULAR_NUDGE:g} rad (singular)"
         pose = nudged
-    spec_user = None
-    if springs is not None:
-        spec_user = load_spec(
-            dict(springs, frame=frame)
-            if isinstance(springs, dict)
-            else _spec_with_frame(springs, frame)
-        )
+    spec_user = None if spec_data is None else load_spec(dict(spec_data, frame=frame))
     spec = default_spec(text, frame, pose, spec_user)
     if "task" not in spec:
         spec["task"] = default_task(text, frame, spec["positions"])
@@ -591,7 +590,8 @@ def _nudge_if_singular(text, tree: UrdfTree, frame: str, chain: list[str], pose:
     return out
 
 
-def _spec_with_frame(springs, frame):
+def _read_spec(springs) -> dict:
+    """A spring spec from a YAML path or YAML text (its 'frame' is optional here)."""
     import yaml
 
     p = Path(springs) if not (isinstance(springs, str) and "\n" in springs) else None
@@ -603,7 +603,6 @@ def _spec_with_frame(springs, frame):
         raise SpecError(f"spring specification is not valid YAML: {e}") from None
     if not isinstance(data, dict):
         raise SpecError("spring specification must be a mapping of keys")
-    data.setdefault("frame", frame)
     return data
 
 

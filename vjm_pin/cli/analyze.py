@@ -189,7 +189,7 @@ def run(args) -> int:
         w = np.zeros(6) if args.wrench is None else finite_vector(args.wrench, "--wrench")
         if args.payload is not None:
             w = w + payload_wrench(args.payload)
-        if extra:
+        if extra or vm.n_q == 0:  # springs and motors only: Newton on eq. (5') directly
             eq = solve_loaded(
                 vm, w, LinkLoads.earth() if args.gravity else None, method=args.method
             )
