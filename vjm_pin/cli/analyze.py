@@ -251,6 +251,6 @@ def _human(vm, robot, out, fmt_matrix) -> str:
     wk = out.get("weakest")
     if wk is not None:
         lines.append(
-            f"lowest translational stiffness: {wk['stiffness'] / 1e3:.4g} N/mm along {np.array2string(wk['direction'], precision=3)} (world)"
+            f"lowest translational stiffness: {wk['stiffness'] / 1e3:.4g} N/mm along {np.array2string(wk['direction'], precision=3, suppress_small=True)} (world)"
         )
     return "\n".join(lines)
