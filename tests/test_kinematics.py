@@ -113,3 +113,24 @@ def test_task_rows_restrict_jacobian():
     full = Kinematics(vm.model, vm.frame_id).evaluate(vm.reference).jacobian
     assert np.allclose(b.J_theta, full[:3][:, vm.theta_idx])
     assert np.allclose(b.J_q, full[:3][:, vm.q_idx])
+
+
+def test_single_joint_model_keeps_matrix_shapes():
+    """A one-joint model: Pinocchio returns a 1-D Jacobian; ours stays (6, 1), Hessian (6, 1, 1)."""
+    from vjm_pin import load_vjm
+
+    text = """<robot name="one" xmlns:vjm="urn:vjm-pin:1"><link name="base"/><link name="arm"/><link name="tip"/>
+    <joint name="j" type="revolute"><parent link="base"/><child link="arm"/><axis xyz="0 0 1"/>
+    <limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+    <joint name="t" type="fixed"><parent link="arm"/><child link="tip"/><origin xyz="0.5 0 0"/></joint>
+    <vjm:task frame="tip" components="y"/><vjm:joint name="j" role="actuated" stiffness="2.0" position="0"/></robot>"""
+    vm = load_vjm(text)
+    st = Kinematics(vm.model, vm.frame_id).evaluate(vm.reference)
+    assert st.jacobian.shape == (6, 1) and st.hessian.shape == (6, 1, 1)
+    from vjm_pin import EquilibriumSolver, unloaded_stiffness
+
+    assert unloaded_stiffness(vm).stiffness[1, 1] == pytest.approx(2.0 / 0.25)
+    res = EquilibriumSolver(vm).solve_wrench([0, 1.0, 0, 0, 0, 0])
+    # closed form: k θ = F_y L cos θ (the force along y acts on the 0.5 m arm)
+    assert 2.0 * res.x[0] == pytest.approx(0.5 * np.cos(res.x[0]) * 1.0, rel=1e-7)
+    assert res.wrench[1] == pytest.approx(1.0, rel=1e-7)

@@ -83,12 +83,14 @@ class Kinematics:
         model, data, fid = self.model, self.data, self.frame_id
         pin.computeJointJacobians(model, data, x)
         pin.updateFramePlacement(model, data, fid)
-        jac = pin.getFrameJacobian(model, data, fid, pin.LOCAL_WORLD_ALIGNED)
+        nv = model.nv
+        # (pin returns a 1-D array for a one-joint model: keep the (6, nv) shape)
+        jac = pin.getFrameJacobian(model, data, fid, pin.LOCAL_WORLD_ALIGNED).reshape(6, nv)
         hes = None
         if hessian:
             pin.computeJointKinematicHessians(model, data)
             hes = fix_hessian_layout(
-                pin.getFrameKinematicHessian(model, data, fid, pin.LOCAL_WORLD_ALIGNED)
+                np.asarray(pin.getFrameKinematicHessian(model, data, fid, pin.LOCAL_WORLD_ALIGNED)).reshape(6, nv, nv)
             )
         m = data.oMf[fid]
         return KinematicState(m.translation.copy(), m.rotation.copy(), jac.copy(), hes)
