@@ -149,7 +149,6 @@ class EquilibriumSolver:
         self.seed = seed
         self.follow_stable = follow_stable
         self.max_step = 0.3
-        self.debug = False
         self.p0, self.r0 = self.kin.placement(vm.reference)
         self.task = list(vm.task)
         self.free = np.concatenate([vm.theta_idx, vm.q_idx]).astype(int)
@@ -280,8 +279,6 @@ class EquilibriumSolver:
                         fn = np.linalg.lstsq(jn.T, gn, rcond=None)[0]
                         e_n, _, _, r_n, _, _ = self._residuals(xn, fn, sn, p_t, r_t)
                         accepted = self._kkt_norm(e_n, r_n) < 0.5 * kkt0
-                    if self.debug:
-                        print(f"   it {it} alpha {alpha:.3g} dE {en_ - e0:.4g} slope {slope:.3g} mod {modified} acc {accepted}")
                 if accepted:
                     break
                 alpha *= 0.5
