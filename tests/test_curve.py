@@ -318,3 +318,22 @@ def test_cli_curve_text_subdivide_and_errors(capsys):
         == 2
     )
     assert "no link spring" in capsys.readouterr().err
+
+
+def test_softening_post_critical_branch_is_not_a_new_critical_point():
+    """Model C with a deeper Π posture (±45°): one buckling, then the force falls slowly
+    (negative tangent stiffness); only the buckling is a critical point."""
+    import math
+
+    from vjm_pin.generator import generate_vjm
+    from vjm_pin.model import load_vjm
+    from vjm_pin.paper_models import base_angle, paper_spec, rigid_chain_urdf
+
+    spec = paper_spec("c", "pi", beam=PAPER_BEAM)
+    qa = math.radians(-45)
+    spec["positions"] = {"base_z": base_angle(qa, qa), "qa1": qa, "qa2": qa}
+    vm = load_vjm(generate_vjm(rigid_chain_urdf(1.0), spec))
+    c = trace_curve(vm, [-1, 0, 0], 0.5, steps=10)
+    assert len(c.critical) == 1, c.critical
+    after = [p.stiffness for p in c.points[c.critical[0].index :]]
+    assert min(after) < 0  # the branch really softens after buckling

@@ -14,7 +14,7 @@ Between two consecutive points ``a`` (stable) and ``b`` there is a critical poin
 
 1. ``b`` is unstable (the followed equilibrium lost stability and no stable one was
    found), or
-2. the tangent stiffness drops sharply: ``k_b < DROP_RATIO · k_a`` with
+2. the tangent stiffness drops sharply: ``k_a > 0`` and ``k_b < DROP_RATIO · k_a`` with
    :data:`DROP_RATIO` = 0.5 (the followed stable equilibrium jumped to another branch:
    bifurcation, e.g. the straight, axially stiff column of Models B/C turning into the
    bent one; ``k_a = inf`` for a straight chain of rigid links, Model A).
@@ -189,7 +189,9 @@ def _is_drop(k_a: float, k_b: float) -> bool:
         return False
     if np.isinf(k_a):
         return not np.isinf(k_b)
-    return k_b < DROP_RATIO * k_a
+    # only a stiff (positive) state can lose stiffness sharply; a softening post-critical
+    # branch (k ≤ 0, force falling) is not a new critical point
+    return k_a > 0 and k_b < DROP_RATIO * k_a
 
 
 def _same_branch(a: CurvePoint, m: CurvePoint) -> bool:
@@ -534,7 +536,7 @@ def trace_curve(
                 before = points[-2] if len(points) > 1 and points[-2].stable else None
                 c = _refine(vm, solver, d, a, p, i, kin, refine_tol, before)
                 h = max_deflection / steps
-                if not critical or abs(c.deflection - critical[-1].deflection) > 1e-6 * h:
+                if not critical or abs(c.deflection - critical[-1].deflection) > 0.01 * h:
                     critical.append(c)  # else the same transition, seen again one step later
         points.append(p)
         prev = eq
