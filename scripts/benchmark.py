@@ -1,0 +1,585 @@
+#!/usr/bin/env python
+"""Speed benchmark of ``vjm_pin`` (issue 7): one command, a table and a JSON file.
+
+Measured for the bundled ``paper-c-s`` model (Model C, S posture: a straight column of three
+6-D beam springs with a passive universal joint at the base and a spherical joint at the end):
+
+- the floor: one Pinocchio evaluation of the joint Jacobians, the kinematic Hessians and the
+  frame Jacobian / Hessian at the end frame (what the method cannot avoid);
+- the time per Newton iteration of :class:`~vjm_pin.solver.EquilibriumSolver` (warm-started
+  curve solves divided by their iterations) and its ratio to the floor;
+- loaded stiffness by eq. (30), (32), (33) and the stability check of eq. (23);
+- a 200-point force–deflection curve in compression with stiffness and stability at each point;
+- the same curve with ``J`` and ``H`` by central differences of Pinocchio placements (the
+  baseline: :class:`FDKinematics`, a drop-in :class:`~vjm_pin.kinematics.Kinematics`);
+- scaling with link subdivision k = 1, 2, 4, 8, 16 (time per curve point versus nθ, fitted
+  exponent);
+- the OpenSeesPy peer (``scripts/opensees_peer.py``): critical force and wall time of the same
+  column with corotational beams, next to vjm_pin's critical force on the subdivided model;
+- ``ur5`` with 6-D link springs and map throughput, when those modules exist (else a note).
+
+Minimum and median over repeats are reported (other processes share the machine). Timings
+are never asserted by tests; ``tests/test_benchmark_smoke.py`` runs these functions on tiny
+sizes and checks structure and that the baseline reproduces the Pinocchio results.
+
+Usage: ``python scripts/benchmark.py [--quick] [--json bench.json] [--repeats N]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import math
+import os
+import platform
+import statistics
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from vjm_pin.kinematics import Kinematics, KinematicState
+from vjm_pin.model import VjmModel, load_vjm
+from vjm_pin.paper_models import PAPER_BEAM, paper_model_urdf
+from vjm_pin.solver import (
+    EquilibriumSolver,
+    blocks_at,
+    check_stability,
+    loaded_stiffness,
+    stiffness_eq30,
+    stiffness_eq32,
+    stiffness_eq33,
+)
+
+HERE = Path(__file__).resolve().parent
+#: Compression of the column: the end moves towards the base (world −x).
+DIRECTION = np.array([-1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+
+TARGETS = {
+    "newton_over_floor": 3.0,  # Newton iteration ≤ 3 × floor
+    "curve_200_s": 0.2,  # 200-point curve ≤ 0.2 s
+    "speedup_over_fd": 20.0,  # ≥ 20 × the finite-difference baseline
+    "opensees_rel_err": 0.02,  # critical force within 2 %
+    "opensees_slowdown": 100.0,  # OpenSees ≥ 100 × slower
+}
+
+
+# --------------------------------------------------------------------------- machine
+def machine_info() -> dict:
+    """Cores, CPU, Python/numpy/Pinocchio versions and numpy's BLAS."""
+    info = {
+        "cores": os.cpu_count(),
+        "affinity_cores": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None,
+        "cpu": platform.processor() or platform.machine(),
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "pinocchio": pin.__version__,
+        "blas": "unknown",
+    }
+    try:
+        from threadpoolctl import threadpool_info  # optional
+
+        info["blas"] = "; ".join(f"{d.get('internal_api')} {d.get('version')} ({d.get('num_threads')} threads)" for d in threadpool_info())
+    except ImportError:
+        try:
+            cfg = np.show_config(mode="dicts")
+            blas = cfg["Build Dependencies"]["blas"]
+            info["blas"] = f"{blas.get('name')} {blas.get('version')}"
+        except Exception:  # noqa: BLE001 - old numpy without mode="dicts"
+            pass
+    try:
+        with open("/proc/cpuinfo") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    info["cpu"] = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    return info
+
+
+# --------------------------------------------------------------------------- timing
+def timeit(fn, repeats: int = 5, number: int = 1) -> dict:
+    """Run ``fn`` ``number`` times per repeat; min and median seconds per call."""
+    ts = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        for _ in range(number):
+            fn()
+        ts.append((time.perf_counter() - t) / number)
+    return {"min": min(ts), "median": statistics.median(ts), "repeats": repeats, "number": number}
+
+
+def paper_model(k: int = 1) -> VjmModel:
+    """Model C, S posture, with the bundled beam (``PAPER_BEAM``), links subdivided ``k`` times."""
+    if k == 1:
+        from vjm_pin.registry import resolve_model
+
+        return resolve_model("paper-c-s")
+    return load_vjm(paper_model_urdf("c", "s", beam=PAPER_BEAM, subdivide=k))
+
+
+# --------------------------------------------------------------------------- FD baseline
+class FDKinematics(Kinematics):
+    """The baseline: the frame Jacobian and kinematic Hessian by central differences of
+    Pinocchio placements only (no Pinocchio derivatives).
+
+    ``J[:3, i] = (p(x + h eᵢ) − p(x − h eᵢ)) / 2h``, ``J[3:, i] = log3(R(x + h eᵢ) R(x − h eᵢ)ᵀ) / 2h``
+    (world-aligned, as :class:`~vjm_pin.kinematics.Kinematics`), and
+    ``H[:, :, j] = (J(x + h_H eⱼ) − J(x − h_H eⱼ)) / 2h_H`` (inner step ``h_inner``; the steps
+    minimise the error against Pinocchio's analytic derivatives on ``paper-c-s``, ~1e-7 abs.) — 2n + 4n² placements per
+    evaluation with a Hessian. Every joint of a VJM model is 1-DOF (nq = nv), so ``x ± h eᵢ``
+    is a valid configuration step.
+    """
+
+    def __init__(self, model: pin.Model, frame_id: int, h: float = 1e-5, h_hessian: float = 3e-4, h_inner: float = 3e-5):
+        super().__init__(model, frame_id)
+        self.h = h
+        self.h_hessian = h_hessian
+        self.h_inner = h_inner
+
+    def _jacobian(self, x: np.ndarray, h: float) -> np.ndarray:
+        n = self.model.nv
+        jac = np.empty((6, n))
+        for i in range(n):
+            xp = x.copy()
+            xp[i] += h
+            xm = x.copy()
+            xm[i] -= h
+            pp, rp = self.placement(xp)
+            pm, rm = self.placement(xm)
+            jac[:3, i] = (pp - pm) / (2 * h)
+            jac[3:, i] = pin.log3(rp @ rm.T) / (2 * h)
+        return jac
+
+    def evaluate(self, x: np.ndarray, hessian: bool = True) -> KinematicState:
+        x = np.asarray(x, float)
+        jac = self._jacobian(x, self.h)
+        hes = None
+        if hessian:
+            n = self.model.nv
+            hh = self.h_hessian
+            hes = np.empty((6, n, n))
+            for j in range(n):
+                xp = x.copy()
+                xp[j] += hh
+                xm = x.copy()
+                xm[j] -= hh
+                hes[:, :, j] = (self._jacobian(xp, self.h_inner) - self._jacobian(xm, self.h_inner)) / (2 * hh)
+        p, r = self.placement(x)
+        return KinematicState(p, r, jac, hes)
+
+
+def fd_solver(vm: VjmModel, **kwargs) -> EquilibriumSolver:
+    """An :class:`EquilibriumSolver` whose kinematics is :class:`FDKinematics` (same algorithm)."""
+    s = EquilibriumSolver(vm, **kwargs)
+    s.kin = FDKinematics(vm.model, vm.frame_id)
+    return s
+
+
+# --------------------------------------------------------------------------- curve
+@dataclass
+class CurveRun:
+    """One traced curve: per point deflection (m), force along the direction (N), iterations,
+    stability and the loaded stiffness along the direction (N/m)."""
+
+    deflection: np.ndarray
+    force: np.ndarray
+    iterations: np.ndarray
+    stable: np.ndarray
+    stiffness: np.ndarray
+    engine: str
+    x: np.ndarray  # (steps, nq) configurations
+    critical: float = float("nan")  # first critical force found by trace_curve (N)
+
+
+def _trace_curve_fn():
+    if importlib.util.find_spec("vjm_pin.solver.curve") is None:
+        return None
+    try:
+        from vjm_pin.solver.curve import trace_curve
+    except ImportError:
+        return None
+    return trace_curve
+
+
+def trace(vm: VjmModel, solver: EquilibriumSolver, max_deflection: float, steps: int, use_library: bool = True) -> CurveRun:
+    """A force–deflection curve in compression with stiffness (eq. 30) and stability at every
+    point. Uses ``vjm_pin.solver.curve.trace_curve`` when it exists (``use_library``), else a
+    warm-started loop of ``solve`` + ``loaded_stiffness``."""
+    fn = _trace_curve_fn() if use_library else None
+    if fn is not None:
+        c = fn(vm, DIRECTION, max_deflection, steps=steps, solver=solver)
+        pts = [p for p in c.points if p.deflection > 0]
+        return CurveRun(
+            deflection=np.array([p.deflection for p in pts]),
+            force=np.array([p.force for p in pts]),
+            iterations=np.array([p.equilibrium.iterations for p in pts]),
+            stable=np.array([bool(p.stable) for p in pts]),
+            stiffness=np.array([p.stiffness for p in pts]),
+            engine="vjm_pin.solver.curve.trace_curve",
+            x=np.array([p.equilibrium.x for p in pts]),
+            critical=float(c.critical[0].force) if c.critical else float("nan"),
+        )
+    results = []
+    prev = None
+    for s in np.linspace(max_deflection / steps, max_deflection, steps):
+        r = solver.solve(s * DIRECTION, x0=None if prev is None else prev.x, wrench0=None if prev is None else prev.wrench)
+        results.append(r)
+        prev = r
+    return _from_results(vm, solver, results, "benchmark loop (solve + loaded_stiffness + stability)")
+
+
+def _from_results(vm, solver, results, engine) -> CurveRun:
+    u = DIRECTION[:3]
+    kc = []
+    for r in results:
+        k = loaded_stiffness(vm, r, "eq30", kin=solver.kin).stiffness
+        kc.append(float(u @ k[:3, :3] @ u))
+    return CurveRun(
+        deflection=np.array([float(r.deflection[:3] @ u) for r in results]),
+        force=np.array([float(r.wrench[:3] @ u) for r in results]),  # compression positive
+        iterations=np.array([r.iterations for r in results]),
+        stable=np.array([bool(r.stable) for r in results]),
+        stiffness=np.array(kc),
+        engine=engine,
+        x=np.array([r.x for r in results]),
+        critical=float("nan"),
+    )
+
+
+def critical_from_curve(run: CurveRun, knee_fraction: float = 0.01) -> float:
+    """Force at the first point after which the secant stiffness falls below
+    ``knee_fraction`` × the initial one (the definition of ``opensees_peer.critical_force``)."""
+    d = np.concatenate([[0.0], run.deflection])
+    f = np.concatenate([[0.0], run.force])
+    sec = np.diff(f) / np.diff(d)
+    k0 = sec[0]
+    idx = np.nonzero(sec < knee_fraction * k0)[0]
+    return float(f[idx[0] + 1]) if idx.size else float("nan")
+
+
+def curve_critical(run: CurveRun) -> float:
+    """The critical force located by ``trace_curve`` (bisection, eq. 23) when available, else the
+    knee of :func:`critical_from_curve`."""
+    return run.critical if np.isfinite(run.critical) else critical_from_curve(run)
+
+
+def euler_load_c(beam=PAPER_BEAM, L: float = 1.0) -> float:
+    """Euler load of the pinned-pinned column of length 3L about its weak axis (N)."""
+    i_weak = beam["b"] * beam["a"] ** 3 / 12.0
+    return math.pi**2 * beam["E"] * i_weak / (3 * L) ** 2
+
+
+def default_max_deflection(vm: VjmModel, factor: float = 6.0) -> float:
+    """``factor`` × the axial shortening at the Euler load (m): well past buckling."""
+    a = PAPER_BEAM["a"] * PAPER_BEAM["b"]
+    return factor * euler_load_c() * 3.0 / (PAPER_BEAM["E"] * a)
+
+
+# --------------------------------------------------------------------------- benchmarks
+def bench_floor(vm: VjmModel, repeats: int = 7, number: int = 200) -> dict:
+    """One Pinocchio evaluation of J and the kinematic Hessian at the end frame (s)."""
+    model, data, fid = vm.model, vm.model.createData(), vm.frame_id
+    x = vm.reference.copy()
+
+    def floor():
+        pin.computeJointJacobians(model, data, x)
+        pin.updateFramePlacement(model, data, fid)
+        pin.getFrameJacobian(model, data, fid, pin.LOCAL_WORLD_ALIGNED)
+        pin.computeJointKinematicHessians(model, data)
+        pin.getFrameKinematicHessian(model, data, fid, pin.LOCAL_WORLD_ALIGNED)
+
+    kin = Kinematics(model, fid)
+    return {
+        "floor": timeit(floor, repeats, number),
+        "kinematics_evaluate": timeit(lambda: kin.evaluate(x), repeats, number),
+    }
+
+
+def bench_newton(vm: VjmModel, max_deflection: float, steps: int = 50, repeats: int = 5) -> dict:
+    """Time per Newton iteration: warm-started curve solves (no stiffness) / total iterations."""
+    pts = np.linspace(max_deflection / steps, max_deflection, steps)
+    iters = []
+
+    def run():
+        s = EquilibriumSolver(vm)
+        prev, total = None, 0
+        for d in pts:
+            r = s.solve(d * DIRECTION, x0=None if prev is None else prev.x, wrench0=None if prev is None else prev.wrench)
+            total += r.iterations
+            prev = r
+        iters.append(total)
+
+    t = timeit(run, repeats)
+    it = iters[0]
+    return {
+        "solves": steps,
+        "iterations": int(it),
+        "per_iteration": {"min": t["min"] / it, "median": t["median"] / it},
+        "per_solve": {"min": t["min"] / steps, "median": t["median"] / steps},
+    }
+
+
+def bench_stiffness(vm: VjmModel, deflection: float, repeats: int = 7, number: int = 100) -> dict:
+    """Per-evaluation cost of the blocks, eq. (30), (32), (33) and the stability check."""
+    s = EquilibriumSolver(vm)
+    r = s.solve(deflection * DIRECTION)
+    b = blocks_at(vm, r.x, r.wrench, s.kin)
+    out = {
+        "blocks": timeit(lambda: blocks_at(vm, r.x, r.wrench, s.kin), repeats, number),
+        "stability": timeit(lambda: check_stability(b), repeats, number),
+    }
+    for name, fn in (("eq30", stiffness_eq30), ("eq32", stiffness_eq32), ("eq33", stiffness_eq33)):
+        try:
+            fn(b, vm.task)
+            out[name] = timeit(lambda fn=fn: fn(b, vm.task), repeats, number)
+        except Exception as e:  # noqa: BLE001 - e.g. eq33 needs J_θ k J_θᵀ invertible
+            out[name] = {"error": f"{type(e).__name__}: {str(e)[:120]}"}
+    return out
+
+
+def bench_curve(vm: VjmModel, max_deflection: float, steps: int = 200, repeats: int = 3, fd: bool = True, fd_steps: int | None = None) -> dict:
+    """The full curve (solve + stiffness + stability per point), and the FD baseline on the same
+    curve (``fd_steps`` points over the same range when given, compared per point)."""
+    runs = []
+
+    def run():
+        runs.append(trace(vm, EquilibriumSolver(vm), max_deflection, steps))
+
+    t = timeit(run, repeats)
+    c = runs[-1]
+    out = {
+        "engine": c.engine,
+        "steps": steps,
+        "max_deflection": max_deflection,
+        "time": t,
+        "per_point": {"min": t["min"] / steps, "median": t["median"] / steps},
+        "iterations_per_point": {"mean": float(c.iterations.mean()), "max": int(c.iterations.max())},
+        "all_stable": bool(c.stable.all()),
+        "critical_force": curve_critical(c),
+        "max_force": float(c.force.max()),
+    }
+    if fd:
+        # the same algorithm on the same range, both through the benchmark's own loop
+        n = fd_steps or steps
+        t0 = time.perf_counter()
+        cf = trace(vm, fd_solver(vm), max_deflection, n, use_library=False)
+        tf = time.perf_counter() - t0
+        refs = []
+        tp = timeit(lambda: refs.append(trace(vm, EquilibriumSolver(vm), max_deflection, n, use_library=False)), repeats)
+        ref = refs[-1]
+        out["fd"] = {
+            "steps": n,
+            "time": tf,
+            "pinocchio_time": tp,
+            "per_point": tf / n,
+            "iterations": int(cf.iterations.sum()),
+            "pinocchio_iterations": int(ref.iterations.sum()),
+            "max_force_diff_rel": float(np.abs(cf.force - ref.force).max() / max(np.abs(ref.force).max(), 1e-300)),
+            "speedup": tf / tp["median"],
+        }
+    return out
+
+
+def bench_scaling(ks=(1, 2, 4, 8, 16), steps: int = 20, repeats: int = 3) -> dict:
+    """Time per curve point versus nθ over link subdivision k; fitted exponent of t ∝ nθ^p."""
+    rows = []
+    for k in ks:
+        vm = paper_model(k)
+        md = default_max_deflection(vm)
+        runs = []
+        t = timeit(lambda: runs.append(trace(vm, EquilibriumSolver(vm), md, steps)), repeats)
+        c = runs[-1]
+        rows.append(
+            {
+                "k": k,
+                "n_theta": int(vm.n_theta),
+                "nv": int(vm.model.nv),
+                "per_point": {"min": t["min"] / steps, "median": t["median"] / steps},
+                "iterations_per_point": float(c.iterations.mean()),
+                "critical_force": curve_critical(c),
+            }
+        )
+    n = np.log([r["n_theta"] for r in rows])
+    y = np.log([r["per_point"]["min"] for r in rows])
+    p = float(np.polyfit(n, y, 1)[0]) if len(rows) > 1 else float("nan")
+    return {"rows": rows, "exponent": p, "euler_load": euler_load_c()}
+
+
+def vjm_critical_force(k: int, steps: int = 60, repeats: int = 3) -> dict:
+    """Critical force of the subdivided Model C column by vjm_pin: a compression curve to 2×
+    the Euler shortening, force at the knee (same definition as the OpenSees peer)."""
+    vm = paper_model(k)
+    md = default_max_deflection(vm, factor=2.0)
+    runs = []
+    t = timeit(lambda: runs.append(trace(vm, EquilibriumSolver(vm), md, steps)), repeats)
+    return {"k": k, "n_theta": int(vm.n_theta), "critical_force": curve_critical(runs[-1]), "time": t, "steps": steps}
+
+
+def load_peer():
+    spec = importlib.util.spec_from_file_location("opensees_peer", HERE / "opensees_peer.py")
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules["opensees_peer"] = mod
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def bench_opensees(k: int = 16, vjm: dict | None = None, repeats: int = 1) -> dict:
+    """OpenSees critical force and wall time with ``k`` elements per link, same beam."""
+    try:
+        peer = load_peer()
+        peer.load_opensees()
+    except Exception as e:  # noqa: BLE001 - optional dependency
+        return {"skipped": f"OpenSeesPy unavailable: {e}"}
+    b = PAPER_BEAM
+    walls, res = [], None
+    for _ in range(repeats):
+        t = time.perf_counter()
+        res = peer.critical_force(E=b["E"], nu=b["nu"], L=1.0, a=b["a"], b=b["b"], elements_per_link=k)
+        walls.append(time.perf_counter() - t)
+    out = {
+        "elements_per_link": k,
+        "critical_force": float(res["critical_force"]),
+        "euler_load": float(res["euler_load"]),
+        "wall_time": {"min": min(walls), "median": statistics.median(walls), "internal": float(res["wall_time"])},
+        "n_steps": int(res["n_steps"]),
+    }
+    if vjm is not None:
+        out["vjm"] = vjm
+        out["rel_err"] = abs(vjm["critical_force"] / out["critical_force"] - 1.0)
+        out["slowdown"] = out["wall_time"]["min"] / vjm["time"]["min"]
+    return out
+
+
+def bench_ur5() -> dict:
+    if importlib.util.find_spec("vjm_pin.robots") is None:
+        return {"skipped": "vjm_pin.robots does not exist yet (ur5 with 6-D link springs)"}
+    return {"skipped": "vjm_pin.robots exists but its API is not wired into the benchmark yet"}
+
+
+def bench_map() -> dict:
+    for name in ("vjm_pin.map", "vjm_pin.solver.map", "vjm_pin.mapping"):
+        if importlib.util.find_spec(name) is not None:
+            return {"skipped": f"{name} exists but is not wired into the benchmark yet"}
+    return {"skipped": "no map module yet (map throughput not measured)"}
+
+
+# --------------------------------------------------------------------------- report
+def targets(report: dict) -> list[dict]:
+    rows = []
+    fl = report["floor"]["floor"]["min"]
+    nw = report["newton"]["per_iteration"]["min"]
+    rows.append({"target": "Newton iteration <= 3x floor", "measured": nw / fl, "unit": "x floor", "met": nw / fl <= TARGETS["newton_over_floor"]})
+    cu = report["curve"]
+    t200 = cu["time"]["min"] * 200 / cu["steps"]
+    rows.append({"target": "200-point curve <= 0.2 s", "measured": t200, "unit": "s", "met": t200 <= TARGETS["curve_200_s"]})
+    if "fd" in cu:
+        sp = cu["fd"]["speedup"]
+        rows.append({"target": ">= 20x faster than FD baseline", "measured": sp, "unit": "x", "met": sp >= TARGETS["speedup_over_fd"]})
+    op = report.get("opensees", {})
+    if "rel_err" in op:
+        rows.append({"target": "critical force within 2% of OpenSees", "measured": 100 * op["rel_err"], "unit": "%", "met": op["rel_err"] <= TARGETS["opensees_rel_err"]})
+        rows.append({"target": "OpenSees >= 100x slower", "measured": op["slowdown"], "unit": "x", "met": op["slowdown"] >= TARGETS["opensees_slowdown"]})
+    return rows
+
+
+def format_report(report: dict) -> str:
+    ms = 1e3
+    m = report["machine"]
+    lines = [
+        f"machine: {m['cores']} cores ({m['cpu']}), numpy {m['numpy']} BLAS {m['blas']}, pinocchio {m['pinocchio']}",
+        f"model: {report['model']['name']}  nv={report['model']['nv']} nθ={report['model']['n_theta']}  (min / median ms)",
+        "",
+    ]
+
+    def row(name, t, scale=ms, unit="ms"):
+        lines.append(f"  {name:<44} {t['min'] * scale:10.4f} / {t['median'] * scale:10.4f} {unit}")
+
+    row("floor (J + kinematic Hessian)", report["floor"]["floor"])
+    row("Kinematics.evaluate", report["floor"]["kinematics_evaluate"])
+    row(f"Newton iteration ({report['newton']['iterations']} its)", report["newton"]["per_iteration"])
+    row("equilibrium solve (warm start)", report["newton"]["per_solve"])
+    for k in ("blocks", "eq30", "eq32", "eq33", "stability"):
+        v = report["stiffness"][k]
+        if "error" in v:
+            lines.append(f"  {k:<44} {v['error']}")
+        else:
+            row(k, v)
+    cu = report["curve"]
+    row(f"curve, {cu['steps']} points [{cu['engine'][:20]}]", cu["time"])
+    row("  per point", cu["per_point"])
+    lines.append(f"  iterations per point: mean {cu['iterations_per_point']['mean']:.2f}, max {cu['iterations_per_point']['max']}")
+    if "fd" in cu:
+        fd = cu["fd"]
+        lines.append(f"  FD baseline, same {fd['steps']}-point curve: {fd['time']:.3f} s ({fd['iterations']} its) vs Pinocchio {fd['pinocchio_time']['min']:.4f} / {fd['pinocchio_time']['median']:.4f} s ({fd['pinocchio_iterations']} its): speed-up {fd['speedup']:.1f}x (vs median); max force diff {fd['max_force_diff_rel']:.2e} (rel)")
+    sc = report.get("scaling")
+    if sc:
+        lines.append("")
+        lines.append(f"scaling (Euler load {sc['euler_load']:.5f} N):   k   nθ   ms/point (min/median)   its/point   F_cr (N)")
+        for r in sc["rows"]:
+            lines.append(f"  {r['k']:>28} {r['n_theta']:>5}   {r['per_point']['min'] * ms:8.3f} / {r['per_point']['median'] * ms:8.3f}   {r['iterations_per_point']:8.2f}   {r['critical_force']:.5f}")
+        lines.append(f"  fitted exponent: time per point ∝ nθ^{sc['exponent']:.2f}")
+    op = report.get("opensees")
+    if op:
+        lines.append("")
+        if "skipped" in op:
+            lines.append(f"OpenSees peer: skipped ({op['skipped']})")
+        else:
+            lines.append(f"OpenSees peer ({op['elements_per_link']} el/link): F_cr {op['critical_force']:.6f} N in {op['wall_time']['min']:.3f} s (Euler {op['euler_load']:.6f} N)")
+            if "vjm" in op:
+                v = op["vjm"]
+                lines.append(f"vjm_pin (k={v['k']}, nθ={v['n_theta']}, {v['steps']} pts): F_cr {v['critical_force']:.6f} N in {v['time']['min']:.3f} s (median {v['time']['median']:.3f} s)")
+    for key in ("ur5", "map"):
+        if key in report and "skipped" in report[key]:
+            lines.append(f"{key}: skipped ({report[key]['skipped']})")
+    lines.append("")
+    lines.append("targets:")
+    for t in report["targets"]:
+        lines.append(f"  {t['target']:<40} {t['measured']:10.3f} {t['unit']:<8} {'MET' if t['met'] else 'NOT MET'}")
+    return "\n".join(lines)
+
+
+def run(quick: bool = False, repeats: int = 5, opensees: bool = True, scaling_ks=(1, 2, 4, 8, 16), opensees_k: int = 8) -> dict:
+    vm = paper_model(1)
+    md = default_max_deflection(vm)
+    report = {
+        "machine": machine_info(),
+        "model": {"name": vm.name, "nv": int(vm.model.nv), "n_theta": int(vm.n_theta), "task": list(vm.task)},
+        "max_deflection": md,
+    }
+    report["floor"] = bench_floor(vm, repeats=repeats, number=50 if quick else 300)
+    report["newton"] = bench_newton(vm, md, steps=20 if quick else 200, repeats=repeats)
+    report["stiffness"] = bench_stiffness(vm, 0.5 * md, repeats=repeats, number=20 if quick else 200)
+    report["curve"] = bench_curve(vm, md, steps=200, repeats=repeats, fd=True, fd_steps=20 if quick else 200)
+    report["scaling"] = bench_scaling(scaling_ks[:3] if quick else scaling_ks, steps=10 if quick else 20, repeats=1 if quick else 3)
+    if opensees:
+        vj = vjm_critical_force(opensees_k, repeats=1 if quick else 3)
+        report["opensees"] = bench_opensees(opensees_k, vj)
+    report["ur5"] = bench_ur5()
+    report["map"] = bench_map()
+    report["targets"] = targets(report)
+    return report
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--quick", action="store_true", help="fewer points and repeats")
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--json", default="benchmark.json", help="output JSON path")
+    ap.add_argument("--no-opensees", action="store_true")
+    ap.add_argument("--opensees-k", type=int, default=8, help="elements (and VJM subdivisions) per link for the peer")
+    args = ap.parse_args(argv)
+    report = run(quick=args.quick, repeats=args.repeats, opensees=not args.no_opensees, opensees_k=args.opensees_k)
+    print(format_report(report))
+    Path(args.json).write_text(json.dumps(report, indent=1, default=float))
+    print(f"\nJSON: {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,101 @@
+"""Smoke test of scripts/benchmark.py: its functions run on tiny sizes, the report has the
+documented structure, and the finite-difference baseline (same algorithm, J and H by central
+differences of Pinocchio placements) reproduces the Pinocchio path. Timings are never asserted."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from vjm_pin.kinematics import Kinematics
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def bench():
+    spec = importlib.util.spec_from_file_location("vjm_benchmark", ROOT / "scripts" / "benchmark.py")
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules["vjm_benchmark"] = mod
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.fixture(scope="module")
+def vm(bench):
+    return bench.paper_model(1)
+
+
+def test_fd_kinematics_matches_pinocchio(bench, vm):
+    rng = np.random.default_rng(3)
+    x = vm.reference + 1e-2 * rng.standard_normal(vm.model.nq)
+    ref = Kinematics(vm.model, vm.frame_id).evaluate(x)
+    fd = bench.FDKinematics(vm.model, vm.frame_id).evaluate(x)
+    np.testing.assert_allclose(fd.position, ref.position, atol=1e-14, err_msg="end position (m)")
+    np.testing.assert_allclose(fd.jacobian, ref.jacobian, atol=1e-8, err_msg="FD Jacobian vs Pinocchio (m/rad)")
+    scale = np.abs(ref.hessian).max()
+    np.testing.assert_allclose(fd.hessian, ref.hessian, atol=1e-6 * scale, err_msg="FD Hessian vs Pinocchio")
+
+
+def test_fd_baseline_curve_equals_pinocchio_curve(bench, vm):
+    md = bench.default_max_deflection(vm)
+    # 6 points: the first ones on the straight (axially stiff) branch, the last ones buckled
+    ref = bench.trace(vm, bench.EquilibriumSolver(vm), md, 6, use_library=False)
+    fd = bench.trace(vm, bench.fd_solver(vm), md, 6, use_library=False)
+    fmax = np.abs(ref.force).max()
+    assert fmax > 0
+    np.testing.assert_allclose(fd.force, ref.force, atol=1e-6 * fmax, err_msg="force along the curve (N)")
+    np.testing.assert_allclose(fd.deflection, ref.deflection, atol=1e-12, err_msg="deflection (m)")
+    np.testing.assert_array_equal(fd.stable, ref.stable)
+    # the buckled column's tangent stiffness is ~1e-5 of the axial one and comes from H alone,
+    # so the FD Hessian's error (~1e-7 abs) shows at the 1e-3 level there
+    np.testing.assert_allclose(fd.stiffness, ref.stiffness, rtol=5e-3, err_msg="tangent stiffness (N/m)")
+    # the curve crosses buckling: the stiffness collapses and the force stays below the axial line
+    assert ref.stiffness[-1] < 1e-3 * ref.stiffness[0]
+    assert ref.force[-1] < 0.5 * ref.stiffness[0] * ref.deflection[-1]
+
+
+def test_report_structure_and_targets(bench, vm):
+    md = bench.default_max_deflection(vm)
+    report = {
+        "machine": bench.machine_info(),
+        "model": {"name": vm.name, "nv": vm.model.nv, "n_theta": vm.n_theta, "task": list(vm.task)},
+        "floor": bench.bench_floor(vm, repeats=1, number=2),
+        "newton": bench.bench_newton(vm, md, steps=3, repeats=1),
+        "stiffness": bench.bench_stiffness(vm, 0.5 * md, repeats=1, number=1),
+        "curve": bench.bench_curve(vm, md, steps=4, repeats=1, fd=False),
+        "scaling": bench.bench_scaling((1, 2), steps=2, repeats=1),
+        "ur5": bench.bench_ur5(),
+        "map": bench.bench_map(),
+    }
+    assert report["machine"]["cores"] >= 1
+    for key in ("floor", "kinematics_evaluate"):
+        t = report["floor"][key]
+        assert 0 < t["min"] <= t["median"]
+    assert report["newton"]["iterations"] >= 0 and report["newton"]["solves"] == 3
+    for key in ("blocks", "eq30", "stability"):
+        assert report["stiffness"][key]["min"] > 0
+    assert report["curve"]["steps"] == 4
+    rows = report["scaling"]["rows"]
+    assert [r["k"] for r in rows] == [1, 2]
+    assert rows[1]["n_theta"] == 2 * rows[0]["n_theta"]
+    assert np.isfinite(report["scaling"]["exponent"])
+    report["targets"] = bench.targets(report)
+    names = [t["target"] for t in report["targets"]]
+    assert names[:2] == ["Newton iteration <= 3x floor", "200-point curve <= 0.2 s"]
+    for t in report["targets"]:
+        assert isinstance(t["met"], bool) and np.isfinite(t["measured"])
+    text = bench.format_report(report)
+    assert "targets:" in text and "floor" in text
+
+
+def test_critical_from_curve_knee(bench):
+    d = np.linspace(0.1, 1.0, 10)
+    f = np.minimum(10.0 * d, 4.0)  # k0 = 10, plateau at 4 from d = 0.4
+    run = bench.CurveRun(d, f, np.zeros(10, int), np.ones(10, bool), np.zeros(10), "test", np.zeros((10, 0)))
+    assert bench.critical_from_curve(run) == pytest.approx(4.0)
+    assert bench.curve_critical(run) == pytest.approx(4.0)
