@@ -229,6 +229,8 @@ class EquilibriumSolver:
                 return x, f, it, True, state
             if it == max_iter:
                 break
+            if state.hessian is None:  # restoration evaluates J only; the Hessian when needed
+                state = self.kin.evaluate(x)
             h = state.psi_hessian(full_wrench(vm, f))[np.ix_(self.free, self.free)]
             w = kz - h
             modified = False
@@ -290,11 +292,12 @@ class EquilibriumSolver:
     def _restore(self, x, state, p_t, r_t, max_iter: int = 12):
         """Least-energy restoration of ``g(x) = t``: repeated steps ``δ = M⁻¹Jᵀ(J M⁻¹ Jᵀ)⁻¹ e``
         with the metric ``M = diag(K_θ, 0) + ε·I`` (passive joints move first, as in the
-        fixed-point scheme of eq. 10). Returns (x, state, converged)."""
+        fixed-point scheme of eq. 10). Returns (x, state, converged); ``state`` carries no
+        Hessian (callers evaluate it when they need it)."""
         tol_p = self.tol * self.length_scale
         for _ in range(max_iter + 1):
             if state is None:
-                state = self.kin.evaluate(x)
+                state = self.kin.evaluate(x, hessian=False)
             e = pose_error(p_t, r_t, state.position, state.rotation)[self.task]
             scaled = np.abs(e / np.where(np.array(self.task) < 3, self.length_scale, 1.0)).max() if e.size else 0.0
             if scaled <= 0.01 * self.tol:
@@ -313,7 +316,7 @@ class EquilibriumSolver:
             x = x.copy()
             x[self.free] += delta
             state = None
-        state = self.kin.evaluate(x)
+        state = self.kin.evaluate(x, hessian=False)
         e = pose_error(p_t, r_t, state.position, state.rotation)[self.task]
         return x, state, bool(np.abs(e).max() <= max(tol_p, self.tol))
 
