@@ -163,6 +163,10 @@ class EquilibriumSolver:
         metric = np.diag(1e-6 * self.kscale / self.var_scale**2)
         metric[: self.nt, : self.nt] += vm.K_theta
         self.Minv = np.linalg.inv(metric)
+        # per-task-row scale of pose errors (m rows by L_c, rad rows by 1), and the row groups
+        self._err_scale = np.where(np.array(self.task) < 3, self.length_scale, 1.0)
+        self._rows_p = [i for i, t in enumerate(self.task) if t < 3]
+        self._rows_r = [i for i, t in enumerate(self.task) if t >= 3]
 
     # ----------------------------------------------------------------- helpers
     def energy(self, x: np.ndarray) -> float:
@@ -176,8 +180,7 @@ class EquilibriumSolver:
         tau = vm.K_theta @ (x[vm.theta_idx] - vm.theta0)
         grad = np.concatenate([tau, np.zeros(vm.n_q)])
         r = grad - jz.T @ f
-        tp = [i for i, t in enumerate(self.task) if t < 3]
-        tr = [i for i, t in enumerate(self.task) if t >= 3]
+        tp, tr = self._rows_p, self._rows_r
         res = {
             "position": float(np.abs(e[tp]).max()) if tp else 0.0,
             "orientation": float(np.abs(e[tr]).max()) if tr else 0.0,
@@ -192,7 +195,7 @@ class EquilibriumSolver:
         return e, jz, grad, r, res, ok
 
     def _kkt_norm(self, e, r):
-        return float(np.linalg.norm(e / np.where(np.array(self.task) < 3, self.length_scale, 1.0)) + np.linalg.norm(r) / max(self.kscale, 1e-300))
+        return float(np.linalg.norm(e / self._err_scale) + np.linalg.norm(r) / max(self.kscale, 1e-300))
 
     # ----------------------------------------------------------------- iterations
     def _iterate(self, x, f, p_t, r_t, max_iter):
@@ -299,7 +302,7 @@ class EquilibriumSolver:
             if state is None:
                 state = self.kin.evaluate(x, hessian=False)
             e = pose_error(p_t, r_t, state.position, state.rotation)[self.task]
-            scaled = np.abs(e / np.where(np.array(self.task) < 3, self.length_scale, 1.0)).max() if e.size else 0.0
+            scaled = np.abs(e / self._err_scale).max() if e.size else 0.0
             if scaled <= 0.01 * self.tol:
                 return x, state, True
             jz = state.jacobian[self.task][:, self.free]
