@@ -58,7 +58,12 @@ def reduced_matrix(b: Blocks, basis: np.ndarray | None = None) -> np.ndarray:
     """The matrix of eq. (23): ``Vᵀ [[H_θθ − K_θ, H_θq], [H_qθ, H_qq]] V`` (symmetric part)."""
     if basis is None:
         basis = null_space(b.J_theta, b.J_q)
-    big = np.block([[b.H_tt - b.K_theta, b.H_tq], [b.H_qt, b.H_qq]])
+    nt = b.H_tt.shape[0]
+    big = np.empty((nt + b.H_qq.shape[0],) * 2)  # np.block is slow for small matrices
+    big[:nt, :nt] = b.H_tt - b.K_theta
+    big[:nt, nt:] = b.H_tq
+    big[nt:, :nt] = b.H_qt
+    big[nt:, nt:] = b.H_qq
     m = basis.T @ big @ basis
     return 0.5 * (m + m.T)
 

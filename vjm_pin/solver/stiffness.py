@@ -102,14 +102,19 @@ def _embed(vm_task, kc, kq, kt, method) -> StiffnessResult:
 
 def eq28_matrix(b: Blocks) -> np.ndarray:
     """The matrix of eq. (28): ``[[0, J_q, J_θ], [J_qᵀ, H_qq, H_qθ], [J_θᵀ, H_θq, H_θθ − K_θ]]``."""
-    m = b.J_theta.shape[0]
-    return np.block(
-        [
-            [np.zeros((m, m)), b.J_q, b.J_theta],
-            [b.J_q.T, b.H_qq, b.H_qt],
-            [b.J_theta.T, b.H_tq, b.H_tt - b.K_theta],
-        ]
-    )
+    m, nq = b.J_q.shape
+    e = m + nq
+    a = np.empty((e + b.J_theta.shape[1],) * 2)  # np.block is slow for small matrices
+    a[:m, :m] = 0.0
+    a[:m, m:e] = b.J_q
+    a[:m, e:] = b.J_theta
+    a[m:e, :m] = b.J_q.T
+    a[m:e, m:e] = b.H_qq
+    a[m:e, e:] = b.H_qt
+    a[e:, :m] = b.J_theta.T
+    a[e:, m:e] = b.H_tq
+    a[e:, e:] = b.H_tt - b.K_theta
+    return a
 
 
 def stiffness_eq30(b: Blocks, task=(0, 1, 2, 3, 4, 5)) -> StiffnessResult:
