@@ -99,3 +99,16 @@ def test_critical_from_curve_knee(bench):
     run = bench.CurveRun(d, f, np.zeros(10, int), np.ones(10, bool), np.zeros(10), "test", np.zeros((10, 0)))
     assert bench.critical_from_curve(run) == pytest.approx(4.0)
     assert bench.curve_critical(run) == pytest.approx(4.0)
+
+
+def test_eigen_critical_force_matches_curve_and_converges_to_euler(bench, vm):
+    """The eq. (23) eigenproblem equals the critical force found by tracing the curve, and the
+    subdivided model approaches Euler's load of the pinned-pinned column (closed form)."""
+    md = bench.default_max_deflection(vm)
+    run = bench.trace(vm, bench.EquilibriumSolver(vm), md, 12)
+    f_eig = bench.vjm_eigen_critical_force(vm)
+    assert f_eig == pytest.approx(bench.curve_critical(run), rel=1e-3), "critical force (N): eigenproblem vs curve"
+    e = bench.euler_load_c()
+    f2 = bench.vjm_eigen_critical_force(bench.paper_model(2))
+    assert abs(f2 / e - 1) < abs(f_eig / e - 1), "subdivision must move F_cr towards Euler's load"
+    assert f2 / e - 1 < 0.15
