@@ -502,10 +502,49 @@ def bench_opensees(k: int = 16, vjm: dict | None = None, repeats: int = 1, vjm_c
     return out
 
 
-def bench_ur5() -> dict:
+#: 6-D link springs of the ur5 benchmark: aluminium tubes (illustrative, not UR data).
+UR5_BEAM = {"section": "tube", "outer_diameter": 0.09, "wall": 0.005, "E": 7.0e10, "nu": 0.33}
+UR5_LINKS = ("shoulder_link", "upper_arm_link", "forearm_link", "wrist_1_link", "wrist_2_link")
+
+
+def ur5_model() -> VjmModel:
+    """``ur5`` (example-robot-data) with default actuator springs and 6-D tube link springs."""
+    from vjm_pin.robots import build_robot
+
+    return build_robot("ur5", springs={"links": {ln: {"beam": dict(UR5_BEAM)} for ln in UR5_LINKS}}).vm
+
+
+def bench_ur5(repeats: int = 3, steps: int = 200, max_deflection: float = 1e-3) -> dict:
+    """Floor, Newton iteration, stiffness, stability and a curve (end pushed along −z) for ``ur5``."""
     if importlib.util.find_spec("vjm_pin.robots") is None:
         return {"skipped": "vjm_pin.robots does not exist yet (ur5 with 6-D link springs)"}
-    return {"skipped": "vjm_pin.robots exists but its API is not wired into the benchmark yet"}
+    try:
+        vm = ur5_model()
+    except Exception as e:  # noqa: BLE001 - example-robot-data missing, etc.
+        return {"skipped": f"ur5 unavailable: {type(e).__name__}: {e}"}
+    d = np.array([0.0, 0.0, -1.0, 0.0, 0.0, 0.0])
+    out = {"nv": int(vm.model.nv), "n_theta": int(vm.n_theta), "direction": d.tolist(), "max_deflection": max_deflection}
+    out.update(bench_floor(vm, repeats=repeats, number=100))
+    solver = EquilibriumSolver(vm)
+    pts = np.linspace(max_deflection / steps, max_deflection, steps)
+    its = []
+
+    def curve():
+        prev, total = None, 0
+        for s in pts:
+            r = solver.solve(s * d, x0=None if prev is None else prev.x, wrench0=None if prev is None else prev.wrench)
+            loaded_stiffness(vm, r, "eq30", kin=solver.kin)
+            total += r.iterations
+            prev = r
+        its[:] = [total]
+
+    t = timeit(curve, repeats)
+    out["curve"] = {"steps": steps, "time": t, "iterations": int(its[0])}
+    r = solver.solve(0.5 * max_deflection * d)
+    b = blocks_at(vm, r.x, r.wrench, solver.kin)
+    out["eq30"] = timeit(lambda: stiffness_eq30(b, vm.task), repeats, 100)
+    out["stability"] = timeit(lambda: check_stability(b), repeats, 100)
+    return out
 
 
 def bench_map() -> dict:
@@ -586,6 +625,16 @@ def format_report(report: dict) -> str:
             if "vjm_curve" in op:
                 v = op["vjm_curve"]
                 lines.append(f"vjm_pin trace_curve (k={v['k']}, nθ={v['n_theta']}, {v['steps']} pts + bisection): F_cr {v['critical_force']:.6f} N in {v['time']['min']:.3f} / {v['time']['median']:.3f} s: {100 * op['curve_rel_err']:.2f} % off, {op['curve_slowdown']:.2f}x faster")
+    u = report.get("ur5", {})
+    if u and "skipped" not in u:
+        lines.append("")
+        lines.append(f"ur5 with 6-D link springs (nv={u['nv']}, nθ={u['n_theta']}):")
+        row("floor (J + kinematic Hessian)", u["floor"])
+        row("eq30", u["eq30"])
+        row("stability", u["stability"])
+        cu = u["curve"]
+        row(f"curve, {cu['steps']} points (solve + eq30)", cu["time"])
+        lines.append(f"  iterations: {cu['iterations']}")
     for key in ("ur5", "map"):
         if key in report and "skipped" in report[key]:
             lines.append(f"{key}: skipped ({report[key]['skipped']})")
@@ -613,7 +662,7 @@ def run(quick: bool = False, repeats: int = 5, opensees: bool = True, scaling_ks
         vc = vjm_critical_force(opensees_k, repeats=1 if quick else 3)
         ve = vjm_eigen_critical(opensees_k, repeats=3 if quick else 7)
         report["opensees"] = bench_opensees(opensees_k, ve, vjm_curve=vc)
-    report["ur5"] = bench_ur5()
+    report["ur5"] = bench_ur5(repeats=1 if quick else 3)
     report["map"] = bench_map()
     report["targets"] = targets(report)
     return report

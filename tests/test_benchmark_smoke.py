@@ -112,3 +112,11 @@ def test_eigen_critical_force_matches_curve_and_converges_to_euler(bench, vm):
     f2 = bench.vjm_eigen_critical_force(bench.paper_model(2))
     assert abs(f2 / e - 1) < abs(f_eig / e - 1), "subdivision must move F_cr towards Euler's load"
     assert f2 / e - 1 < 0.15
+
+
+def test_ur5_benchmark_structure(bench):
+    out = bench.bench_ur5(repeats=1, steps=2)
+    assert "skipped" not in out, out.get("skipped")
+    assert out["nv"] == out["n_theta"] == 6 + 6 * len(bench.UR5_LINKS)
+    assert out["curve"]["iterations"] >= 0 and out["curve"]["time"]["min"] > 0
+    assert out["floor"]["min"] > 0 and out["eq30"]["min"] > 0
