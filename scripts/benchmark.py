@@ -547,11 +547,28 @@ def bench_ur5(repeats: int = 3, steps: int = 200, max_deflection: float = 1e-3) 
     return out
 
 
-def bench_map() -> dict:
-    for name in ("vjm_pin.map", "vjm_pin.solver.map", "vjm_pin.mapping"):
-        if importlib.util.find_spec(name) is not None:
-            return {"skipped": f"{name} exists but is not wired into the benchmark yet"}
-    return {"skipped": "no map module yet (map throughput not measured)"}
+def bench_map(n: int = 200, wrench=(0.0, 0.0, -100.0, 0.0, 0.0, 0.0)) -> dict:
+    """Map throughput (poses per second) of ``vjm_pin.maps.run_map`` on ``ur5`` with link
+    springs: ``n`` sampled poses under an end force, serial and on all local cores."""
+    if importlib.util.find_spec("vjm_pin.maps") is None or importlib.util.find_spec("vjm_pin.robots") is None:
+        return {"skipped": "vjm_pin.maps or vjm_pin.robots missing (map throughput not measured)"}
+    from vjm_pin.maps import run_map, sample_poses
+
+    try:
+        vm = ur5_model()
+    except Exception as e:  # noqa: BLE001
+        return {"skipped": f"ur5 unavailable: {type(e).__name__}: {e}"}
+    names, poses = sample_poses(vm, n, seed=0)
+    out = {"model": "ur5 + link springs", "poses": n, "wrench": list(wrench)}
+    for backend in ("serial", "local"):
+        t = time.perf_counter()
+        res = run_map(vm, names, poses, np.array(wrench), backend=backend)
+        dt = time.perf_counter() - t
+        status = getattr(res, "status", None)
+        out[backend] = {"time": dt, "poses_per_s": n / dt, "workers": 1 if backend == "serial" else os.cpu_count()}
+        if status is not None:
+            out[backend]["ok"] = int(np.sum(np.asarray(status) == "ok"))
+    return out
 
 
 # --------------------------------------------------------------------------- report
@@ -635,6 +652,10 @@ def format_report(report: dict) -> str:
         cu = u["curve"]
         row(f"curve, {cu['steps']} points (solve + eq30)", cu["time"])
         lines.append(f"  iterations: {cu['iterations']}")
+    mp = report.get("map", {})
+    if mp and "skipped" not in mp:
+        lines.append(f"map throughput ({mp['model']}, {mp['poses']} poses): serial {mp['serial']['poses_per_s']:.1f} poses/s, "
+                     f"local ({mp['local']['workers']} cores) {mp['local']['poses_per_s']:.1f} poses/s")
     for key in ("ur5", "map"):
         if key in report and "skipped" in report[key]:
             lines.append(f"{key}: skipped ({report[key]['skipped']})")
@@ -663,7 +684,7 @@ def run(quick: bool = False, repeats: int = 5, opensees: bool = True, scaling_ks
         ve = vjm_eigen_critical(opensees_k, repeats=3 if quick else 7)
         report["opensees"] = bench_opensees(opensees_k, ve, vjm_curve=vc)
     report["ur5"] = bench_ur5(repeats=1 if quick else 3)
-    report["map"] = bench_map()
+    report["map"] = bench_map(n=40 if quick else 200)
     report["targets"] = targets(report)
     return report
 

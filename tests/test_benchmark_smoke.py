@@ -69,8 +69,8 @@ def test_report_structure_and_targets(bench, vm):
         "stiffness": bench.bench_stiffness(vm, 0.5 * md, repeats=1, number=1),
         "curve": bench.bench_curve(vm, md, steps=4, repeats=1, fd=False),
         "scaling": bench.bench_scaling((1, 2), steps=2, repeats=1),
-        "ur5": bench.bench_ur5(),
-        "map": bench.bench_map(),
+        "ur5": {"skipped": "tested in test_ur5_benchmark_structure"},
+        "map": bench.bench_map(n=4),
     }
     assert report["machine"]["cores"] >= 1
     for key in ("floor", "kinematics_evaluate"):
@@ -84,6 +84,7 @@ def test_report_structure_and_targets(bench, vm):
     assert [r["k"] for r in rows] == [1, 2]
     assert rows[1]["n_theta"] == 2 * rows[0]["n_theta"]
     assert np.isfinite(report["scaling"]["exponent"])
+    assert report["map"]["serial"]["ok"] == report["map"]["local"]["ok"] == 4, report["map"]
     report["targets"] = bench.targets(report)
     names = [t["target"] for t in report["targets"]]
     assert names[:2] == ["Newton iteration <= 3x floor", "200-point curve <= 0.2 s"]
