@@ -284,3 +284,62 @@ def test_bad_parallel_models():
         load_parallel(bad)
     with pytest.raises(ModelError, match="no <vjm:leg"):
         load_parallel(xml.split("<vjm:platform")[0] + "</robot>")
+
+
+def _columns_xml(L=1.0, kr=100.0, ka=1e5):
+    xa, ta = _column_leg("A", (1, 0, 0), (0, 1, 0), (0, 0, 0), L, kr, ka)
+    xb, tb = _column_leg("B", (0, 1, 0), (1, 0, 0), (L, -L, 0), L, kr, ka)
+    return (
+        '<robot name="columns" xmlns:vjm="urn:vjm-pin:1"><link name="base"/>'
+        + "".join(xa + xb)
+        + '<vjm:platform name="p" components="x y z"/>'
+        + "".join(ta + tb)
+        + "</robot>"
+    )
+
+
+@pytest.mark.parametrize("free", [False, True])
+def test_robot_curve_locates_the_closed_form_critical_point(free):
+    """trace_robot_force_curve on the two-column robot of the previous test, pushed along −x.
+    Platform held across x: column A buckles in plane at the closed-form δ_c of the previous
+    test (a per-leg bifurcation, bisection on the stiffness drop). Platform free across x: the
+    platform sways out of plane first, when its z stiffness k_r/(L−δ)² (A, shortened by δ) +
+    k_r/L² (B) − P/(L−δ) (A's pendulum term, P = k_a δ) vanishes (regula falsi on BᵀK_C B).
+    Both are located to the refinement tolerance and the stiffness falls more than 5×."""
+    from scipy.optimize import brentq
+
+    from vjm_pin.parallel import trace_robot_force_curve
+
+    L, kr, ka = 1.0, 100.0, 1e5
+
+    def in_plane(d):
+        a, b = L / 2 - d, L / 2
+        return kr * (1 + ((a + b) / b) ** 2) - ka * d * a * (a + b) / b
+
+    def sway(d):
+        return kr / (L - d) ** 2 + kr / L**2 - ka * d / (L - d)
+
+    d_c = brentq(sway if free else in_plane, 0.0, 0.2)
+    rs = RobotSolver(load_parallel(_columns_xml(L, kr, ka)))
+    c = trace_robot_force_curve(
+        rs, [-1, 0, 0], 3.4e-3 if free else 7e-3, 7, free=free, refine_tol=1e-6
+    )
+    assert len(c.critical) == 1, c.critical
+    cp = c.critical[0]
+    assert cp.kind == ("platform" if free else "drop")
+    assert cp.deflection == pytest.approx(d_c, rel=1e-4)
+    # straight columns: P = k_a δ (the bending springs of B add less than 0.1 %)
+    assert cp.force == pytest.approx(ka * d_c, rel=1e-3)
+    assert cp.stiffness_after < cp.stiffness_before / 5
+    assert c.free is free
+
+
+def test_robot_curve_rejects_bad_input():
+    from vjm_pin.exceptions import InputError
+    from vjm_pin.parallel import trace_robot_force_curve
+
+    rs = RobotSolver(load_parallel(_columns_xml()))
+    with pytest.raises(InputError, match="translation"):
+        trace_robot_force_curve(rs, [0, 0, 0, 1, 0, 0], 0.01)
+    with pytest.raises(InputError, match="max_deflection"):
+        trace_robot_force_curve(rs, [1, 0, 0], -0.01)

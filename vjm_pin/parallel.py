@@ -472,6 +472,16 @@ class RobotCurvePoint:
     unstable_legs: tuple[str, ...]
     equilibrium: RobotEquilibrium = field(repr=False)
 
+    @property
+    def deflection(self) -> float:
+        """Alias of ``s`` (the name :class:`vjm_pin.solver.CurvePoint` uses)."""
+        return self.s
+
+    @property
+    def wrench(self) -> np.ndarray:
+        """(6,) external wrench on the platform (N, N·m)."""
+        return self.equilibrium.wrench
+
 
 def trace_robot_curve(
     pm_or_solver, direction, max_deflection: float, n_points: int = 50, method: str = "eq30"
@@ -512,3 +522,381 @@ def trace_robot_curve(
         )
         prev = eq
     return out
+
+
+# --------------------------------------------------------------------------------------------
+# Force–deflection curves with the platform free across the loading direction (Table 2, Fig. 7)
+# --------------------------------------------------------------------------------------------
+
+#: A step whose directional stiffness falls below this fraction of the previous one is a
+#: critical point (same rule as :data:`vjm_pin.solver.curve.DROP_RATIO`).
+ROBOT_DROP_RATIO = 0.5
+#: Amplitudes (m or rad) of the perturbation along the unstable mode that leaves a saddle.
+_PERTURB = (1e-4, 1e-3, 1e-2)
+
+
+@dataclass(frozen=True)
+class RobotCriticalPoint:
+    """A critical (buckling) point of a robot force–deflection curve.
+
+    Attributes:
+        force: Critical force along the direction (N).
+        deflection: Critical deflection along the direction (m).
+        stiffness_before: Directional stiffness (N/m) at the end of the pre-critical branch.
+        stiffness_after: Directional stiffness (N/m) of the followed branch just after.
+        index: Index in ``RobotCurve.points`` of the first point after it.
+        kind: ``"platform"`` (the free platform coordinates lose stability: the reduced
+            matrix ``Bᵀ K_C B`` gets a negative eigenvalue, located by regula falsi) or
+            ``"drop"`` (a stiffness drop without that, e.g. a leg snapping to another
+            configuration; located by bisection).
+        mode: (6,) the unstable platform mode (``B v``), world axes, for ``kind="platform"``.
+    """
+
+    force: float
+    deflection: float
+    stiffness_before: float
+    stiffness_after: float
+    index: int
+    kind: str
+    mode: np.ndarray | None = field(default=None, repr=False)
+
+
+@dataclass(frozen=True)
+class RobotCurve:
+    """A robot force–deflection curve.
+
+    Attributes:
+        direction: (6,) unit direction (translation), world axes.
+        free: Whether the platform was free across the direction (zero wrench there).
+        points: The followed (stable when one exists) branch.
+        critical: Critical points found on it.
+        stopped: Why the curve ends before ``max_deflection`` (no equilibrium found), or "".
+    """
+
+    direction: np.ndarray
+    free: bool
+    points: tuple[RobotCurvePoint, ...]
+    critical: tuple[RobotCriticalPoint, ...]
+    branches: tuple = ()  # no unstable-branch tracing for robots (kept for the plot helpers)
+    stopped: str = ""  # why the curve ends before max_deflection ("" when it does not)
+
+    @property
+    def deflections(self) -> np.ndarray:
+        return np.array([p.s for p in self.points])
+
+    @property
+    def forces(self) -> np.ndarray:
+        return np.array([p.force for p in self.points])
+
+
+def _complement(d: np.ndarray, task: list[int]) -> np.ndarray:
+    """Orthonormal basis (6, k) of the task components orthogonal to ``d``."""
+    e = np.eye(6)[:, task]
+    u, s, _ = np.linalg.svd(e - np.outer(d, d @ e), full_matrices=False)
+    return u[:, s > 1e-9]
+
+
+def directional_stiffness(k: np.ndarray, d: np.ndarray, b: np.ndarray | None) -> float:
+    """Stiffness along ``d`` (N/m): ``dᵀ K d`` with the platform held (``b`` None), or the
+    Schur complement ``dᵀKd − dᵀKB (BᵀKB)⁻¹ BᵀKd`` with the platform free along the columns
+    of ``b`` (the reciprocal of ``dᵀ K⁻¹ d`` when ``[d B]`` spans all components)."""
+    kdd = float(d @ k @ d)
+    if b is None or b.shape[1] == 0:
+        return kdd
+    kbb = b.T @ k @ b
+    kbd = b.T @ k @ d
+    kdb = d @ k @ b
+    try:
+        return kdd - float(kdb @ np.linalg.solve(kbb, kbd))
+    except np.linalg.LinAlgError:
+        return float("nan")
+
+
+def _energy(eq: RobotEquilibrium) -> float:
+    return float(sum(lg.equilibrium.energy for lg in eq.legs))
+
+
+def _free_eigen(rs: RobotSolver, eq: RobotEquilibrium, b: np.ndarray):
+    k = rs.stiffness(eq)
+    h = b.T @ k @ b
+    lam, v = np.linalg.eigh(0.5 * (h + h.T))
+    return k, lam, v
+
+
+def solve_free(
+    rs: RobotSolver,
+    d: np.ndarray,
+    s: float,
+    start: RobotEquilibrium,
+    *,
+    leave_saddle: bool = True,
+    tol: float = 1e-9,
+    max_iter: int = 60,
+):
+    """Robot equilibrium with the platform displaced by ``s`` along the translation ``d`` and
+    free across it: ``Bᵀ F = 0`` for the complement basis ``B`` (no external load there).
+
+    The free coordinates minimise the spring energy Σ Π⁽ⁱ⁾ (each leg's eq. 5 equilibrium is a
+    constrained energy minimum, so ``∂Π/∂t = F``): saddle-free Newton steps
+    ``δy = −|BᵀK_C B|⁻¹ Bᵀ F`` (eigenvalues by their modulus) with an energy line search, so
+    a step never climbs towards a saddle. With ``leave_saddle`` an equilibrium where
+    ``BᵀK_C B`` is indefinite (the symmetric branch past a bifurcation) is left along its
+    unstable mode, both signs, and the lower-energy stable result is kept.
+
+    Returns:
+        (eq, k, lam): the equilibrium, its ``K_C`` (6, 6) and the eigenvalues of ``BᵀK_C B``.
+    Raises:
+        NoEquilibrium: a leg has no equilibrium, or Newton does not converge.
+    """
+    b = _complement(d, rs.task)
+    # move along d from the start's pose to s (exact for a translation)
+    s0 = float(d @ start.deflection)
+    eq = rs.solve(target=displace(start.position, start.rotation, (s - s0) * d), x0=start)
+
+    def newton(eq):
+        fscale = max(float(np.linalg.norm(eq.wrench)), 1.0)
+        for _ in range(max_iter):
+            k, lam, v = _free_eigen(rs, eq, b)
+            g = b.T @ eq.wrench
+            if np.linalg.norm(g) <= tol * fscale:
+                return eq, k, lam, v
+            if leave_saddle:  # saddle-free Newton: descend the energy
+                mod = np.maximum(np.abs(lam), 1e-10 * np.abs(lam).max())
+            else:  # plain Newton: continue the branch, stable or not
+                mod = np.where(
+                    np.abs(lam) > 1e-10 * np.abs(lam).max(), lam, 1e-10 * np.abs(lam).max()
+                )
+            dy = -(v @ ((v.T @ g) / mod))
+            e0, g0 = _energy(eq), np.linalg.norm(g)
+            step, new = 1.0, None
+            for _ in range(30):
+                try:
+                    cand = rs.solve(
+                        target=displace(eq.position, eq.rotation, b @ (step * dy)), x0=eq
+                    )
+                except NoEquilibrium:
+                    cand = None
+                if cand is not None:
+                    e1 = _energy(cand)
+                    g1 = np.linalg.norm(b.T @ cand.wrench)
+                    descends = e1 < e0 - 1e-14 * abs(e0) or (e1 <= e0 + 1e-12 * abs(e0) and g1 < g0)
+                    if descends if leave_saddle else g1 < g0:
+                        new = cand
+                        break
+                step *= 0.5
+            if new is None:
+                return eq, k, lam, v
+            eq = new
+        k, lam, v = _free_eigen(rs, eq, b)
+        return eq, k, lam, v
+
+    eq, k, lam, v = newton(eq)
+    fscale = max(float(np.linalg.norm(eq.wrench)), 1.0)
+    converged = np.linalg.norm(b.T @ eq.wrench) <= 1e-6 * fscale
+    if leave_saddle and converged and lam.size and lam.min() < 0:
+        best = None
+        for amp in _PERTURB:
+            for sign in (1.0, -1.0):
+                try:
+                    start2 = rs.solve(
+                        target=displace(eq.position, eq.rotation, sign * amp * (b @ v[:, 0])),
+                        x0=eq,
+                    )
+                    e2, k2, lam2, v2 = newton(start2)
+                except NoEquilibrium:
+                    continue
+                ok = np.linalg.norm(b.T @ e2.wrench) <= 1e-6 * fscale and lam2.min() > 0
+                if ok and (best is None or _energy(e2) < _energy(best[0])):
+                    best = (e2, k2, lam2, v2)
+            if best is not None:
+                break
+        if best is not None:
+            eq, k, lam, v = best
+    if not np.linalg.norm(b.T @ eq.wrench) <= 1e-6 * fscale:
+        raise NoEquilibrium(
+            f"free-platform robot equilibrium at s = {s:.6g}: wrench across the direction "
+            f"{np.linalg.norm(b.T @ eq.wrench):.3g} did not vanish",
+            None,
+            float(np.linalg.norm(b.T @ eq.wrench)),
+        )
+    return eq, k, lam
+
+
+def _robot_point(s, d, b, eq, k, lam) -> RobotCurvePoint:
+    stable_free = bool(lam.size == 0 or lam.min() > 0)
+    unstable = tuple(eq.unstable_legs) + (() if stable_free else ("platform",))
+    return RobotCurvePoint(
+        float(s),
+        float(d @ eq.wrench),
+        directional_stiffness(k, d, b),
+        bool(eq.stable and stable_free),
+        unstable,
+        eq,
+    )
+
+
+def trace_robot_force_curve(
+    pm_or_solver,
+    direction,
+    max_deflection: float,
+    steps: int = 40,
+    *,
+    free: bool = True,
+    refine_tol: float = 1e-4,
+    progress=None,
+) -> RobotCurve:
+    """Force–deflection curve of a parallel robot with critical-point detection (paper §6.2,
+    Fig. 7, Table 2).
+
+    The platform is displaced by ``s·d`` (``d`` a translation, ``0 ≤ s ≤ max_deflection``);
+    with ``free`` (default) the other platform components carry no load (:func:`solve_free`),
+    which is the loading of Table 2 (a force along the bisector at the platform point);
+    without, the platform is held (``solve(s·d)``, as :func:`trace_robot_curve`).
+    Stability: every leg stable (eq. 23) and, free, ``BᵀK_C B`` positive definite.
+
+    Critical points (rule of :mod:`vjm_pin.solver.curve`): between a stable point ``a`` and
+    the next ``b``, when ``b`` is unstable, was reached by leaving a saddle, or its stiffness
+    is below :data:`ROBOT_DROP_RATIO` × ``a``'s. If the branch continued from ``a`` without
+    leaving saddles loses the positive definiteness of ``BᵀK_C B`` before ``b``, the root of
+    its smallest eigenvalue is found by Illinois regula falsi (``kind="platform"``);
+    otherwise the drop is bracketed by bisection (``kind="drop"``) until the force is known
+    to ``refine_tol``.
+    """
+    rs = pm_or_solver if isinstance(pm_or_solver, RobotSolver) else RobotSolver(pm_or_solver)
+    d = np.asarray(direction, float).ravel()
+    if d.size == 3:
+        d = np.concatenate([d, np.zeros(3)])
+    if d.size != 6 or not np.all(np.isfinite(d)) or np.linalg.norm(d) == 0 or np.any(d[3:]):
+        raise InputError(
+            f"direction must be a translation (3 numbers, or 6 with zero rotation), not all zero, "
+            f"got {np.asarray(direction).tolist()}"
+        )
+    if not (np.isfinite(max_deflection) and max_deflection > 0):
+        raise InputError(f"max_deflection must be a positive number (m), got {max_deflection}")
+    if int(steps) != steps or steps < 1:
+        raise InputError(f"steps must be a positive integer, got {steps}")
+    d = d / np.linalg.norm(d)
+    missing = [COMPONENTS[i] for i in range(3) if d[i] and i not in rs.task]
+    if missing:
+        raise InputError(f"direction has components {missing} the platform does not constrain")
+    b = _complement(d, rs.task) if free else None
+
+    def at(s, start, leave=True):
+        if free:
+            eq, k, lam = solve_free(rs, d, s, start, leave_saddle=leave)
+        else:
+            eq = rs.solve(s * d, x0=start)
+            k, lam = rs.stiffness(eq), np.zeros(0)
+        return _robot_point(s, d, b, eq, k, lam), lam
+
+    s_grid = [max_deflection * i / steps for i in range(steps + 1)]
+    zero = rs.solve(np.zeros(6))
+    points: list[RobotCurvePoint] = []
+    critical: list[RobotCriticalPoint] = []
+    prev_eq = zero
+    stopped = ""
+    for i, s in enumerate(s_grid):
+        try:
+            p, _ = at(s, prev_eq)
+        except NoEquilibrium as e:
+            stopped = f"no equilibrium at s = {s:.6g} m: {e}"
+            break
+        if points:
+            a = points[-1]
+            drop = (
+                a.stiffness > 0
+                and np.isfinite(a.stiffness)
+                and np.isfinite(p.stiffness)
+                and p.stiffness < ROBOT_DROP_RATIO * a.stiffness
+            )
+            if a.stable and (not p.stable or drop):
+                c = _refine_robot(at, rs, d, b, a, p, i, refine_tol)
+                h = max_deflection / steps
+                if not critical or abs(c.deflection - critical[-1].deflection) > 1e-3 * h:
+                    critical.append(c)  # else the same transition, seen again one step later
+        points.append(p)
+        prev_eq = p.equilibrium
+        if progress is not None:
+            progress(i + 1, steps + 1)
+    return RobotCurve(d, bool(free), tuple(points), tuple(critical), stopped=stopped)
+
+
+def _min_lam(at, s, start):
+    p, lam = at(s, start, leave=False)
+    return p, (float(lam.min()) if lam.size else np.inf)
+
+
+def _refine_robot(at, rs, d, b, a: RobotCurvePoint, bpt: RobotCurvePoint, index, refine_tol):
+    """Locate the critical point between ``a`` (stable) and ``bpt`` (see
+    :func:`trace_robot_force_curve`)."""
+    from .solver.curve import MAX_BISECTIONS
+
+    lo, flo = _min_lam(at, a.s, a.equilibrium)
+    hi, fhi = None, None
+    if b is not None:
+        try:
+            hi, fhi = _min_lam(at, bpt.s, a.equilibrium)
+        except NoEquilibrium:
+            hi = None
+    if hi is not None and flo > 0 and fhi < 0:
+        side = 0
+        for _ in range(MAX_BISECTIONS):
+            s = (lo.s * fhi - hi.s * flo) / (fhi - flo)
+            try:  # always from a's state: the continued branch, not a neighbour near the root
+                m, fm = _min_lam(at, s, a.equilibrium)
+            except NoEquilibrium:
+                break
+            if fm > 0:
+                lo, flo = m, fm
+                if side == -1:
+                    fhi *= 0.5
+                side = -1
+            else:
+                hi, fhi = m, fm
+                if side == 1:
+                    flo *= 0.5
+                side = 1
+            if abs(hi.s - lo.s) <= refine_tol * abs(s):
+                break
+        w = flo / (flo - fhi)
+        s_c = lo.s + w * (hi.s - lo.s)
+        # the force at the root: the pre-critical branch extrapolated from lo with a's tangent
+        # stiffness (on the continued branch the free coordinates diverge at the root, so a
+        # solve there is ill-conditioned)
+        f_c = lo.force + a.stiffness * (s_c - lo.s)
+        kbb = b.T @ rs.stiffness(lo.equilibrium) @ b
+        _, vec = np.linalg.eigh(0.5 * (kbb + kbb.T))
+        # stiffness before: the last stable grid point (on the symmetric branch the directional
+        # stiffness diverges at the root when the mode couples to d)
+        return RobotCriticalPoint(
+            float(f_c),
+            float(s_c),
+            float(a.stiffness),
+            float(bpt.stiffness),
+            index,
+            "platform",
+            b @ vec[:, 0],
+        )
+    # bisection on "still on the pre-critical branch"
+    lo_p, hi_p = a, bpt
+    for _ in range(MAX_BISECTIONS):
+        ds = hi_p.s - lo_p.s
+        if abs(lo_p.stiffness * ds) <= refine_tol * max(abs(lo_p.force), abs(hi_p.force), 1e-300):
+            break
+        s = 0.5 * (lo_p.s + hi_p.s)
+        try:
+            m, _ = at(s, a.equilibrium)
+        except NoEquilibrium:
+            break
+        if m.stable and m.stiffness >= ROBOT_DROP_RATIO * a.stiffness:
+            lo_p = m
+        else:
+            hi_p = m
+    return RobotCriticalPoint(
+        float(lo_p.force),
+        float(lo_p.s),
+        float(lo_p.stiffness),
+        float(bpt.stiffness),
+        index,
+        "drop",
+    )

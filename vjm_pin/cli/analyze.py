@@ -177,7 +177,10 @@ def run(args) -> int:
     from ..loads import LinkLoads, payload_wrench, solve_loaded
     from ..solver import EquilibriumSolver
     from .common import dump_json, finite_vector, fmt_matrix
+    from .parallel_cmds import is_parallel_model, run_analyze
 
+    if is_parallel_model(args.model):  # parallel robots (<vjm:leg> tags): vjm_pin/cli/parallel_cmds.py
+        return run_analyze(args)
     vm, robot = load_from_args(args)
     extra = args.payload is not None or args.gravity
     if extra and args.deflection is not None:

@@ -124,7 +124,10 @@ def run(args) -> int:
     from ..exceptions import InputError
     from ..solver import trace_curve
     from .common import dump_json, finite_vector
+    from .parallel_cmds import is_parallel_model, run_curve
 
+    if is_parallel_model(args.model):  # parallel robots (<vjm:leg> tags): vjm_pin/cli/parallel_cmds.py
+        return run_curve(args)
     vm = load_model(args.model, args.subdivide)
     d = finite_vector(args.direction, "--direction")
     if not np.isfinite(args.max_deflection):

@@ -1,0 +1,317 @@
+"""Write the Orthoglide VJM models ``models/urdf/orthoglide-q{0..4}.urdf`` (folded parallelogram)
+and ``models/urdf/orthoglide-2bar-q{0..4}.urdf`` (both bars modelled).
+
+Paper: Pashkevich, Klimchik, Chablat, MMT 46 (2011), §6.2, Table 2 ("the seed paper").
+Every number below carries its source or derivation; ``docs/orthoglide_sources.md`` (§ numbers
+quoted as "src §x") gives the full argument, ``docs/orthoglide.md`` the results.
+``tests/test_orthoglide.py`` regenerates the files and fails if a committed file differs.
+
+Architecture (seed §6.2; src §2.1): three identical P–R–Pa–R legs, actuated prismatic joints
+along the mutually orthogonal base axes e_1, e_2, e_3, a foot (cantilever bracket) carrying the
+first passive revolute R1 at A_i = ρ_i e_i, a parallelogram (two bars, two axles), a passive
+revolute R2 to the platform. R1, R2 are along the axle y_i = e_{i+1} (cyclic choice, src §2.1);
+the parallelogram joints along n_i = e_i × y_i = e_{i+2}.
+
+Variants
+--------
+``orthoglide-qK``  (folded, as the seed paper: "the limb stiffness is described by an equivalent
+    5-d.o.f. virtual spring"). Kinematics R1(y)·Pa1(z)·T_x(L)·[spring]·Pa2(z)·R2(y): the
+    parallelogram as two independent revolutes, so n = 4 passive joints per leg, which gives the
+    seed paper's "(n+6)×(n+6) = 10×10" (its eq. 10 remark). The equivalent spring of the two
+    bars is derived below (src §3.3); its in-plane coupler rotation φz (d²EA/2L) is in series
+    with the passive Pa2 in this realisation and is therefore dropped: the spring is 4-D
+    (x, z, φx, φy). vjm_pin has no mimic joints, so the exact parallelogram constraint
+    (coupler angle = −Pa1) cannot be written in one serial chain.
+``orthoglide-2bar-qK`` (closed loop through the platform): each parallelogram as two serial
+    legs, one per bar (at ±d/2 along the axle), both ending at the platform. Each bar has its own
+    4-D cantilever spring (x, z, φx, φy; in-plane y, φz are the pins). The actuator and the foot,
+    shared by the two bars in the real leg, are split into two halves (k_a/2, K_F/2): exact when
+    the two bars carry equal forces, softer otherwise (the superposition of paper §5 cannot
+    close a loop at the foot). The in-plane coupler rotation is resisted by the two bars'
+    differential stretching, which the folded variant lacks.
+
+Usage: ``python scripts/make_orthoglide.py [--out models/urdf]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+
+from vjm_pin.beam import Beam
+
+NS = "urn:vjm-pin:1"
+
+# ---------------------------------------------------------------- geometry (src §2.2–2.4)
+#: Workspace cube side (m): seed §6.2, "dexterous cubical workspace 200×200×200 mm³".
+CUBE = 0.200
+#: Bar length L (m): Q1, Q2 are the cube vertices on the bisector where the transmission factors
+#: reach the design bounds [0.5, 2.0] (seed §6.2): s₊ = L/√6 (a = s/h = 1/2) and s₋ = −L/√18
+#: (a = −1/4); s₊ − s₋ = 200 mm → L = 0.2/(1/√6 + 1/√18) = 0.31058 m (docs/orthoglide.md, src §2.3).
+L_BAR = CUBE / (1 / math.sqrt(6) + 1 / math.sqrt(18))
+S_PLUS = L_BAR / math.sqrt(6)  # +0.12679 m, the stiff vertex (src §2.4)
+S_MINUS = -L_BAR / math.sqrt(18)  # −0.07320 m, the vertex near the flat singularity (src §2.4)
+#: Work points (m), base frame with origin at the isotropic point Q0 (src §2.4, Table 2 labels:
+#: Q1 = s₊ vertex (stiffest), Q2 = s₋ vertex (near the flat singularity det = 0 at s = −L/√6);
+#: Q3, Q4: the two classes of the other vertices, {2 at s₊, 1 at s₋} and {2 at s₋, 1 at s₊}).
+POINTS = {
+    "q0": (0.0, 0.0, 0.0),
+    "q1": (S_PLUS, S_PLUS, S_PLUS),
+    "q2": (S_MINUS, S_MINUS, S_MINUS),
+    "q3": (S_PLUS, S_PLUS, S_MINUS),
+    "q4": (S_MINUS, S_MINUS, S_PLUS),
+}
+
+# ---------------------------------------------------------------- compliances (src §3.3, tag D)
+#: Aluminium alloy (assumption, src §3.3): E = 70 GPa, G = 26 GPa.
+E_AL, G_AL = 70e9, 26e9
+#: Foot: cantilever bracket l_f = 100 mm, solid 40 × 20 mm (40 across, 20 along the actuator
+#: axis), along the parallelogram normal n_i (assumption, src §2.5 and §3.3; not published).
+FOOT = Beam(0.100, "rectangle", {"a": 0.020, "b": 0.040}, E_AL, G_AL)
+#: Bars: aluminium tubes Ø20 × 2 mm (assumption, src §3.3).
+BAR = Beam(L_BAR, "tube", {"outer_diameter": 0.020, "wall": 0.002}, E_AL, G_AL)
+#: Distance between the two bars along the axle (m): 80 mm (assumption, src §2.5).
+D_AXLE = 0.080
+#: Actuator stiffness (N/m), calibrated (src §3.3): at Q0 every bar is along its actuator, so the
+#: stiffness along the bisector is the axial stiffness of one leg, Table 2's 3.23 kN/mm, hence
+#: 1/k_a = 1/3.23e6 − c_foot(along e_i) − c_bars(axial); see :func:`calibrated_actuator`.
+K_TABLE2_Q0 = 3.23e6
+#: Platform offset r (m): leg i's R2 joint sits at P − r·e_i, on the platform side facing its
+#: actuator. Not published (src §2.5); 0 in the bundled models. An offset along e_i only shifts
+#: ρ_i by the constant r (src §2.2), and at Q0 every leg force still passes through P, so Q0's
+#: unloaded stiffness and the k_a calibration do not depend on it; under load it gives the leg
+#: forces a lever arm on the platform rotation (a compressed leg adds −P·r(1 + r/L) to the
+#: rotational stiffness about the axes normal to it), which is what makes the model buckle at
+#: a few kN (docs/orthoglide.md, sensitivity to r).
+PLATFORM_R = 0.0
+
+
+def bar_spring() -> np.ndarray:
+    """4×4 stiffness of one bar (x, z, φx, φy) at its platform-end, bar frame (N/m, N, N·m/rad):
+    the cantilever tip stiffness of :class:`~vjm_pin.beam.Beam` without the in-plane (y, φz)
+    rows, which the parallelogram's pins (axes along z) release."""
+    keep = [0, 2, 3, 4]
+    return np.linalg.inv(BAR.compliance()[np.ix_(keep, keep)])
+
+
+def parallelogram_spring() -> np.ndarray:
+    """Equivalent spring of the parallelogram at the coupler centre, bar frame (src §3.3).
+
+    Two bars at r_j = (0, ±d/2, 0); each bar's 6×6 end stiffness K_j (the 4×4 of
+    :func:`bar_spring`, zero for the pinned y and φz) is moved to the centre by
+    δp_j = δp + δφ × r_j, K = Σ T_jᵀ K_j T_j. Result (x, y, z, φx, φy, φz): K_yy = 0 (the
+    parallelogram mobility, dropped → the 5-D spring of [49]); K_xx = 2EA/L, K_φzφz = (d²/2)EA/L,
+    K_φxφx = 2GJ/L + (d²/2)·12EI/L³. Returns the 6×6 (y row zero)."""
+    kb = np.zeros((6, 6))
+    keep = [0, 2, 3, 4]
+    kb[np.ix_(keep, keep)] = bar_spring()
+    k = np.zeros((6, 6))
+    for sgn in (1.0, -1.0):
+        r = np.array([0.0, sgn * D_AXLE / 2, 0.0])
+        t = np.eye(6)
+        t[:3, 3:] = -np.array([[0, -r[2], r[1]], [r[2], 0, -r[0]], [-r[1], r[0], 0]])
+        k += t.T @ kb @ t
+    return 0.5 * (k + k.T)
+
+
+def folded_spring() -> np.ndarray:
+    """The 4-D spring (x, z, φx, φy) of the folded variant: the 5-D equivalent spring without φz,
+    which is in series with the passive Pa2 joint here (see the module docstring)."""
+    keep = [0, 2, 3, 4]
+    return parallelogram_spring()[np.ix_(keep, keep)]
+
+
+def foot_axial_compliance() -> float:
+    """Foot compliance along the actuator axis (m/N): the foot frame has z along e_i, so it is the
+    cantilever bending term L³/(3EI_y) (src §3.3: 1.786e−4 mm/N)."""
+    return float(FOOT.compliance()[2, 2])
+
+
+def calibrated_actuator() -> float:
+    """k_a (N/m) such that one leg's axial stiffness at Q0 is Table 2's 3.23 kN/mm: actuator,
+    foot (bending along e_i) and the two bars (axial, 2EA/L) in series (src §3.3: ≈ 8.98 kN/mm)."""
+    c_bars = 1.0 / parallelogram_spring()[0, 0]
+    return 1.0 / (1.0 / K_TABLE2_Q0 - foot_axial_compliance() - c_bars)
+
+
+# ---------------------------------------------------------------- URDF writer
+E3 = np.eye(3)
+
+
+def _f(v) -> str:
+    return " ".join(repr(round(float(x), 15) + 0.0) for x in np.atleast_1d(v))
+
+
+def _rpy(r: np.ndarray) -> np.ndarray:
+    """URDF rpy of a rotation matrix (R = Rz(y) Ry(p) Rx(r))."""
+    import pinocchio as pin
+
+    return np.asarray(pin.rpy.matrixToRpy(np.asarray(r, float)))
+
+
+def leg_angles(p, i: int) -> tuple[float, float, float]:
+    """Actuator position ρ_i (m) and the unloaded passive angles (R1 = a, Pa1 = b) of leg i at
+    platform point p: A_i = ρ_i e_i on the negative side, |P − A_i| = L (src §2.2); with the bar
+    unit vector w in the leg frame (e_i, y_i, n_i), R_y(a)R_z(b)e_x = w gives b = asin(w_y),
+    a = atan2(−w_z, w_x); Pa2 = −b and R2 = −a keep the platform orientation."""
+    p = np.asarray(p, float)
+    j, k = (i + 1) % 3, (i + 2) % 3
+    rho = p[i] - math.sqrt(L_BAR**2 - p[j] ** 2 - p[k] ** 2)
+    w = (p - rho * E3[i]) / L_BAR
+    wl = np.array([w[i], w[j], w[k]])  # leg frame axes: e_i, y_i = e_{i+1}, n_i = e_{i+2}
+    return rho, math.atan2(-wl[2], wl[0]), math.asin(wl[1])
+
+
+class _Writer:
+    def __init__(self, name: str):
+        self.root = ET.Element("robot", {"name": name, "xmlns:vjm": NS})
+        ET.SubElement(self.root, "link", {"name": "base"})
+        self.tags: list[ET.Element] = []
+
+    def joint(self, name, kind, parent, xyz=(0, 0, 0), rpy=(0, 0, 0), axis=None):
+        ET.SubElement(self.root, "link", {"name": name + "_link"})
+        j = ET.SubElement(self.root, "joint", {"name": name, "type": kind})
+        ET.SubElement(j, "parent", {"link": parent})
+        ET.SubElement(j, "child", {"link": name + "_link"})
+        ET.SubElement(j, "origin", {"xyz": _f(xyz), "rpy": _f(rpy)})
+        if axis is not None:
+            ET.SubElement(j, "axis", {"xyz": _f(axis)})
+            lim = "6.283185307179586" if kind == "revolute" else "1.0"
+            ET.SubElement(
+                j, "limit", {"lower": "-" + lim, "upper": lim, "effort": "1", "velocity": "1"}
+            )
+        return name + "_link"
+
+    def tag(self, tag, attrib, text=None, children=()):
+        el = ET.Element(f"vjm:{tag}", attrib)
+        if text is not None:
+            el.text = text
+        for c in children:
+            el.append(c)
+        self.tags.append(el)
+
+    def spring(self, name, parent, dofs, k):
+        """Virtual spring joints along the parent frame's axes (T_s(θ) of eq. 34) and its group."""
+        names = []
+        for d in dofs:
+            axis = E3["xyz".index(d[-1])]
+            kind = "prismatic" if len(d) == 1 else "revolute"
+            parent = self.joint(f"{name}_{d}", kind, parent, axis=axis)
+            names.append(f"{name}_{d}")
+            self.tag("joint", {"name": f"{name}_{d}", "role": "spring"})
+        st = ET.Element("vjm:stiffness")
+        st.text = _f(np.asarray(k, float).ravel())
+        self.tag("spring", {"name": name, "link": parent, "joints": " ".join(names)}, None, [st])
+        return parent
+
+    def text(self) -> str:
+        for t in self.tags:
+            self.root.append(t)
+        ET.indent(self.root)
+        return ET.tostring(self.root, encoding="unicode") + "\n"
+
+
+def _leg(w: _Writer, name: str, i: int, p, k_act: float, k_foot, bar_y: float, k_bar, r: float):
+    """One serial leg (or one bar of a two-bar leg when ``bar_y`` ≠ 0) ending at the platform,
+    whose reference point P is at +r·e_i from the leg's R2 joint (see :data:`PLATFORM_R`)."""
+    e, y, n = E3[i], E3[(i + 1) % 3], E3[(i + 2) % 3]
+    rho, a, b = leg_angles(np.asarray(p, float) - r * e, i)
+    lf = FOOT.length
+    # actuator: the carriage sits at −l_f n_i + ρ e_i (the foot offset is constant, so it does not
+    # change the kinematics of src §2.2); actuated joint with its spring (rest = commanded ρ)
+    link = w.joint(f"{name}_act", "prismatic", "base", xyz=-lf * n, axis=e)
+    w.tag(
+        "joint",
+        {
+            "name": f"{name}_act",
+            "role": "actuated",
+            "position": repr(float(rho)),
+            "stiffness": repr(float(k_act)),
+        },
+    )
+    # foot: from the carriage to A_i along n_i; foot frame x_f = n_i, z_f = e_i (20 mm side),
+    # y_f = e_i × n_i; its 6-D tip spring at A_i (src §4.1 row 3)
+    r_foot = np.column_stack([n, np.cross(e, n), e])
+    link = w.joint(f"{name}_foot", "fixed", link, xyz=lf * n, rpy=_rpy(r_foot))
+    link = w.spring(f"{name}_foot_s", link, ("x", "y", "z", "rx", "ry", "rz"), k_foot)
+    # leg frame (e_i, y_i, n_i) at A_i
+    r_leg = np.column_stack([e, y, n])
+    link = w.joint(f"{name}_to_leg", "fixed", link, rpy=_rpy(r_foot.T @ r_leg))
+    link = w.joint(f"{name}_R1", "revolute", link, axis=(0, 1, 0))
+    w.tag("joint", {"name": f"{name}_R1", "role": "passive", "position": repr(a)})
+    if bar_y:
+        link = w.joint(f"{name}_axle1", "fixed", link, xyz=(0, bar_y, 0))
+    link = w.joint(f"{name}_Pa1", "revolute", link, axis=(0, 0, 1))
+    w.tag("joint", {"name": f"{name}_Pa1", "role": "passive", "position": repr(b)})
+    link = w.joint(f"{name}_bar", "fixed", link, xyz=(L_BAR, 0, 0))
+    link = w.spring(f"{name}_bar_s", link, ("x", "z", "rx", "ry"), k_bar)
+    link = w.joint(f"{name}_Pa2", "revolute", link, axis=(0, 0, 1))
+    w.tag("joint", {"name": f"{name}_Pa2", "role": "passive", "position": repr(-b)})
+    if bar_y:
+        link = w.joint(f"{name}_axle2", "fixed", link, xyz=(0, -bar_y, 0))
+    link = w.joint(f"{name}_R2", "revolute", link, axis=(0, 1, 0))
+    w.tag("joint", {"name": f"{name}_R2", "role": "passive", "position": repr(-a)})
+    # the end link has the leg-frame orientation (e_i, y_i, n_i) at the reference: P = R2 + r e_i
+    w.tag("leg", {"name": name, "frame": link, "offset": _f((r, 0.0, 0.0))})
+
+
+def orthoglide_urdf(point: str, variant: str = "folded", r: float = PLATFORM_R) -> str:
+    """URDF text of the Orthoglide at work point ``point`` (q0…q4); ``variant`` ``folded`` or
+    ``2bar`` (see the module docstring); ``r`` the platform offset (m)."""
+    p = POINTS[point]
+    k_a = calibrated_actuator()
+    k_foot = FOOT.stiffness()
+    if variant == "folded":
+        w = _Writer(f"orthoglide-{point}")
+        for i in range(3):
+            _leg(w, f"leg{i + 1}", i, p, k_a, k_foot, 0.0, folded_spring(), r)
+    elif variant == "2bar":
+        w = _Writer(f"orthoglide-2bar-{point}")
+        for i in range(3):
+            for tag, sgn in (("a", 1.0), ("b", -1.0)):
+                _leg(
+                    w,
+                    f"leg{i + 1}{tag}",
+                    i,
+                    p,
+                    k_a / 2,
+                    k_foot / 2,
+                    sgn * D_AXLE / 2,
+                    bar_spring(),
+                    r,
+                )
+    else:
+        raise ValueError(f"unknown variant {variant!r}; choose 'folded' or '2bar'")
+    w.tag("platform", {"name": "platform", "components": "x y z rx ry rz"})
+    return w.text()
+
+
+def orthoglide_models() -> dict[str, str]:
+    """File name → URDF text of every bundled Orthoglide model."""
+    out = {}
+    for variant, prefix in (("folded", "orthoglide"), ("2bar", "orthoglide-2bar")):
+        for point in POINTS:
+            out[f"{prefix}-{point}.urdf"] = orthoglide_urdf(point, variant)
+    return out
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--out", default=str(Path(__file__).resolve().parent.parent / "models" / "urdf")
+    )
+    args = parser.parse_args(argv)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    for name, text in orthoglide_models().items():
+        (out / name).write_text(text)
+        print(out / name)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,207 @@
+"""``vjm-pin analyze`` and ``vjm-pin curve`` on parallel models (``<vjm:leg>`` tags).
+
+The two commands call :func:`is_parallel_model` first and hand parallel models to
+:func:`run_analyze` / :func:`run_curve` here, so their own code paths stay unchanged. The
+output has the same keys as for a serial chain where they apply, plus ``legs`` (name,
+wrench, stable) and ``unstable_legs``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+
+def model_path(name: str) -> Path | None:
+    """The URDF path of ``name`` (a file or a bundled model), or None."""
+    from ..registry import bundled_models
+
+    p = Path(name)
+    if p.is_file():
+        return p
+    return bundled_models().get(name)
+
+
+def is_parallel_model(name: str) -> bool:
+    """True when ``name`` is a VJM URDF (file or bundled) with ``<vjm:leg>`` tags."""
+    from ..exceptions import VjmError
+    from ..parallel import is_parallel
+    from ..registry import is_vjm_urdf
+
+    p = model_path(name)
+    if p is None or p.suffix != ".urdf" or not is_vjm_urdf(p):
+        return False
+    try:
+        return is_parallel(p)
+    except VjmError:
+        return False
+
+
+def _reject(args, names: dict) -> None:
+    from ..exceptions import InputError
+
+    given = [
+        flag for attr, (flag, default) in names.items() if getattr(args, attr, default) != default
+    ]
+    if given:
+        raise InputError(
+            f"{', '.join(given)} do not apply to a parallel model ('{args.model}'): "
+            "its legs, springs and platform are in its tags"
+        )
+
+
+def legs_list(eq) -> list[dict]:
+    return [{"name": lg.name, "wrench": lg.wrench, "stable": lg.stable} for lg in eq.legs]
+
+
+def run_analyze(args) -> int:
+    """``vjm-pin analyze`` on a parallel model: robot equilibrium for a platform deflection
+    (each leg solved at the same platform pose, wrenches summed) or a wrench (eq. 11 on the
+    aggregated stiffness), stability per leg, ``K_C = Σ K_C⁽ⁱ⁾`` (eq. 30/32/33 per leg)."""
+    from ..parallel import RobotSolver, load_parallel
+    from .analyze import weakest_direction
+    from .common import dump_json, finite_vector, fmt_matrix
+
+    _reject(
+        args,
+        {
+            "q": ("--q", None),
+            "pose_name": ("--pose-name", None),
+            "frame": ("--frame", None),
+            "springs": ("--springs", None),
+            "payload": ("--payload", None),
+            "gravity": ("--gravity", False),
+        },
+    )
+    pm = load_parallel(model_path(args.model))
+    rs = RobotSolver(pm)
+    if args.deflection is not None:
+        eq = rs.solve(finite_vector(args.deflection, "--deflection"))
+    else:
+        w = np.zeros(6) if args.wrench is None else finite_vector(args.wrench, "--wrench")
+        eq = rs.solve_wrench(w) if np.any(w) else rs.solve(np.zeros(6))
+    k = rs.stiffness(eq, args.method)
+    k0 = rs.stiffness(None, args.method)
+    out = {
+        "model": pm.name,
+        "parallel": True,
+        "converged": eq.converged,
+        "wrench": eq.wrench,
+        "deflection": eq.deflection,
+        "stable": eq.stable,
+        "unstable_legs": eq.unstable_legs,
+        "stiffness": k,
+        "stiffness_unloaded": k0,
+        "legs": legs_list(eq),
+    }
+    out["weakest"] = weakest_direction(k, list(pm.task))
+    if args.json:
+        print(dump_json(out))
+        return 0
+    lines = [
+        f"parallel model {pm.name}: {len(pm.legs)} legs ({', '.join(lg.name for lg in pm.legs)})",
+        f"platform deflection [m, rad]: {np.round(eq.deflection, 9).tolist()}",
+        f"platform wrench [N, N·m]:     {np.round(eq.wrench, 6).tolist()}",
+        f"equilibrium {'converged' if eq.converged else 'NOT converged'}, "
+        + ("stable" if eq.stable else f"UNSTABLE (legs: {', '.join(eq.unstable_legs)})"),
+        "legs:",
+    ]
+    for lg in eq.legs:
+        lines.append(
+            f"  {lg.name:12s} {'stable' if lg.stable else 'UNSTABLE':9s} wrench {np.round(lg.wrench, 6).tolist()}"
+        )
+    lines += ["loaded stiffness K_C = Σ legs [N/m, N/rad, N·m/rad]:", fmt_matrix(k)]
+    print("\n".join(lines))
+    return 0
+
+
+def curve_dict(pm, curve) -> dict:
+    return {
+        "model": pm.name,
+        "parallel": True,
+        "direction": curve.direction,
+        "free": curve.free,
+        "points": [
+            {
+                "deflection": p.s,
+                "force": p.force,
+                "wrench": p.wrench,
+                "stable": p.stable,
+                "stiffness": p.stiffness,
+                "unstable_legs": list(p.unstable_legs),
+                "legs": legs_list(p.equilibrium),
+            }
+            for p in curve.points
+        ],
+        "critical": [
+            {
+                "force": c.force,
+                "deflection": c.deflection,
+                "stiffness_before": c.stiffness_before,
+                "stiffness_after": c.stiffness_after,
+                "index": c.index,
+                "kind": c.kind,
+            }
+            for c in curve.critical
+        ],
+        "branches": [],
+    }
+
+
+def run_curve(args) -> int:
+    """``vjm-pin curve`` on a parallel model: the platform moves along DIRECTION (a
+    translation) and is free across it (no load there), with critical-point detection
+    (:func:`vjm_pin.parallel.trace_robot_force_curve`)."""
+    from ..exceptions import InputError
+    from ..parallel import RobotSolver, load_parallel, trace_robot_force_curve
+    from .common import dump_json, finite_vector
+    from .curve import _progress_bar
+
+    _reject(args, {"all_branches": ("--all-branches", False), "subdivide": ("--subdivide", 1)})
+    pm = load_parallel(model_path(args.model))
+    d = finite_vector(args.direction, "--direction")
+    if not np.isfinite(args.max_deflection):
+        raise InputError(f"--max-deflection must be finite, got {args.max_deflection}")
+    cb, bar = _progress_bar(args.steps + 1)
+    try:
+        curve = trace_robot_force_curve(
+            RobotSolver(pm),
+            d,
+            args.max_deflection,
+            args.steps,
+            refine_tol=args.refine_tol,
+            progress=cb,
+        )
+    finally:
+        if bar is not None:
+            bar.close()
+    if args.plot:
+        from ..plots import save_curve_plot
+
+        save_curve_plot(
+            curve,
+            args.plot,
+            title=f"{pm.name}: force–deflection along {np.round(curve.direction, 3).tolist()}",
+        )
+    if args.json:
+        print(dump_json(curve_dict(pm, curve)))
+        return 0
+    print(
+        f"parallel model {pm.name}: direction {np.round(curve.direction, 4).tolist()} "
+        f"(platform free across it), {len(curve.points)} points"
+    )
+    print(f"{'deflection [m]':>18} {'force [N]':>16} {'stiffness [N/m]':>20}  stable")
+    for p in curve.points:
+        note = "yes" if p.stable else "NO (" + ", ".join(p.unstable_legs) + ")"
+        print(f"{p.s:18.8g} {p.force:16.8g} {p.stiffness:20.8g}  {note}")
+    if not curve.critical:
+        print("no critical point (no loss of stability, no sharp stiffness drop) in this range")
+    for c in curve.critical:
+        print(
+            f"critical point ({c.kind}): force {c.force:.8g} N at deflection {c.deflection:.8g} m; "
+            f"stiffness {c.stiffness_before:.6g} -> {c.stiffness_after:.6g} N/m"
+        )
+    if args.plot:
+        print(f"plot written to {args.plot}")
+    return 0
