@@ -1,5 +1,6 @@
-"""Write the Orthoglide VJM models ``models/urdf/orthoglide-q{0..4}.urdf`` (folded parallelogram)
-and ``models/urdf/orthoglide-2bar-q{0..4}.urdf`` (both bars modelled).
+"""Write the Orthoglide VJM models ``models/urdf/orthoglide-q{0..4}.urdf`` (folded parallelogram),
+``orthoglide-coupled-q{0..4}.urdf`` (folded, coupler rotation spring) and
+``orthoglide-2bar-q{0..4}.urdf`` (both bars modelled).
 
 Paper: Pashkevich, Klimchik, Chablat, MMT 46 (2011), §6.2, Table 2 ("the seed paper").
 Every number below carries its source or derivation; ``docs/orthoglide_sources.md`` (§ numbers
@@ -22,6 +23,12 @@ Variants
     with the passive Pa2 in this realisation and is therefore dropped: the spring is 4-D
     (x, z, φx, φy). vjm_pin has no mimic joints, so the exact parallelogram constraint
     (coupler angle = −Pa1) cannot be written in one serial chain.
+``orthoglide-coupled-qK`` (folded, with the fifth spring component): as ``folded``, but Pa1 and
+    Pa2 form a spring pair on the coupler rotation Pa1 + Pa2 with the stiffness (d²/2)EA/L of the
+    5-D spring (+ a residual ε = 1e-6 of it on each joint, since the pair must be positive
+    definite): the mimic constraint of the parallelogram, made elastic with its physical
+    stiffness. The leg then has two passive joints (R1, R2) and a near-free spring direction
+    (the parallelogram mobility, stiffness ε).
 ``orthoglide-2bar-qK`` (closed loop through the platform): each parallelogram as two serial
     legs, one per bar (at ±d/2 along the axle), both ending at the platform. Each bar has its own
     4-D cantilever spring (x, z, φx, φy; in-plane y, φz are the pins). The actuator and the foot,
@@ -88,6 +95,13 @@ K_TABLE2_Q0 = 3.23e6
 #: rotational stiffness about the axes normal to it), which is what makes the model buckle at
 #: a few kN (docs/orthoglide.md, sensitivity to r).
 PLATFORM_R = 0.0
+#: Perpendicular platform offset (m): R2 at P + rp·n_i and A_i = ρ e_i + rp n_i, so the position
+#: kinematics is unchanged; rp > 0 makes the planar chain foot–bar–platform arm a Π, rp < 0 a Z
+#: (seed §6.2 speaks of S/Z → Π transitions). Not published; 0 in the bundled models.
+PLATFORM_RP = 0.0
+#: Residual stiffness of the parallelogram mobility in the coupled variant, relative to the
+#: coupler stiffness (a numerical stand-in for a mimic joint, which vjm_pin lacks).
+EPS_MOBILITY = 1e-6
 
 
 def bar_spring() -> np.ndarray:
@@ -215,15 +229,31 @@ class _Writer:
         return ET.tostring(self.root, encoding="unicode") + "\n"
 
 
-def _leg(w: _Writer, name: str, i: int, p, k_act: float, k_foot, bar_y: float, k_bar, r: float):
-    """One serial leg (or one bar of a two-bar leg when ``bar_y`` ≠ 0) ending at the platform,
-    whose reference point P is at +r·e_i from the leg's R2 joint (see :data:`PLATFORM_R`)."""
+def _leg(
+    w: _Writer,
+    name: str,
+    i: int,
+    p,
+    k_act: float,
+    k_foot,
+    bar_y: float,
+    k_bar,
+    r: float,
+    rp: float = 0.0,
+    k_coupler: float | None = None,
+):
+    """One serial leg (or one bar of a two-bar leg when ``bar_y`` ≠ 0) ending at the platform.
+
+    The leg's R2 joint is at P − r·e_i + rp·n_i (platform offsets, :data:`PLATFORM_R`,
+    :data:`PLATFORM_RP`). With ``k_coupler`` the parallelogram joints Pa1, Pa2 are a spring
+    pair of stiffness ``k_coupler·[[1, 1], [1, 1]] + ε I`` on the coupler rotation Pa1 + Pa2
+    (see :data:`EPS_MOBILITY`), else two passive joints."""
     e, y, n = E3[i], E3[(i + 1) % 3], E3[(i + 2) % 3]
     rho, a, b = leg_angles(np.asarray(p, float) - r * e, i)
     lf = FOOT.length
-    # actuator: the carriage sits at −l_f n_i + ρ e_i (the foot offset is constant, so it does not
-    # change the kinematics of src §2.2); actuated joint with its spring (rest = commanded ρ)
-    link = w.joint(f"{name}_act", "prismatic", "base", xyz=-lf * n, axis=e)
+    # actuator: the carriage sits at (rp − l_f) n_i + ρ e_i, so A_i = ρ e_i + rp n_i (constant
+    # offsets: the kinematics of src §2.2 holds); actuated joint with its spring (rest = ρ)
+    link = w.joint(f"{name}_act", "prismatic", "base", xyz=(rp - lf) * n, axis=e)
     w.tag(
         "joint",
         {
@@ -245,30 +275,48 @@ def _leg(w: _Writer, name: str, i: int, p, k_act: float, k_foot, bar_y: float, k
     w.tag("joint", {"name": f"{name}_R1", "role": "passive", "position": repr(a)})
     if bar_y:
         link = w.joint(f"{name}_axle1", "fixed", link, xyz=(0, bar_y, 0))
+    pa_role = {"role": "spring"} if k_coupler else {"role": "passive", "position": repr(b)}
     link = w.joint(f"{name}_Pa1", "revolute", link, axis=(0, 0, 1))
-    w.tag("joint", {"name": f"{name}_Pa1", "role": "passive", "position": repr(b)})
+    w.tag("joint", {"name": f"{name}_Pa1", **pa_role})
     link = w.joint(f"{name}_bar", "fixed", link, xyz=(L_BAR, 0, 0))
     link = w.spring(f"{name}_bar_s", link, ("x", "z", "rx", "ry"), k_bar)
     link = w.joint(f"{name}_Pa2", "revolute", link, axis=(0, 0, 1))
-    w.tag("joint", {"name": f"{name}_Pa2", "role": "passive", "position": repr(-b)})
+    pa_role = {"role": "spring"} if k_coupler else {"role": "passive", "position": repr(-b)}
+    w.tag("joint", {"name": f"{name}_Pa2", **pa_role})
+    if k_coupler:
+        k = k_coupler * np.ones((2, 2)) + EPS_MOBILITY * k_coupler * np.eye(2)
+        st = ET.Element("vjm:stiffness")
+        st.text = _f(k.ravel())
+        rest = ET.Element("vjm:rest")
+        rest.text = _f((b, -b))
+        w.tag(
+            "spring",
+            {"name": f"{name}_coupler", "link": link, "joints": f"{name}_Pa1 {name}_Pa2"},
+            None,
+            [st, rest],
+        )
     if bar_y:
         link = w.joint(f"{name}_axle2", "fixed", link, xyz=(0, -bar_y, 0))
     link = w.joint(f"{name}_R2", "revolute", link, axis=(0, 1, 0))
     w.tag("joint", {"name": f"{name}_R2", "role": "passive", "position": repr(-a)})
-    # the end link has the leg-frame orientation (e_i, y_i, n_i) at the reference: P = R2 + r e_i
-    w.tag("leg", {"name": name, "frame": link, "offset": _f((r, 0.0, 0.0))})
+    # the end link has the leg-frame orientation (e_i, y_i, n_i) at the reference:
+    # P = R2 + r e_i − rp n_i
+    w.tag("leg", {"name": name, "frame": link, "offset": _f((r, 0.0, -rp))})
 
 
-def orthoglide_urdf(point: str, variant: str = "folded", r: float = PLATFORM_R) -> str:
-    """URDF text of the Orthoglide at work point ``point`` (q0…q4); ``variant`` ``folded`` or
-    ``2bar`` (see the module docstring); ``r`` the platform offset (m)."""
+def orthoglide_urdf(
+    point: str, variant: str = "folded", r: float = PLATFORM_R, rp: float = PLATFORM_RP
+) -> str:
+    """URDF text of the Orthoglide at work point ``point`` (q0…q4); ``variant`` ``folded``,
+    ``coupled`` or ``2bar`` (see the module docstring); ``r``, ``rp`` the platform offsets (m)."""
     p = POINTS[point]
     k_a = calibrated_actuator()
     k_foot = FOOT.stiffness()
-    if variant == "folded":
-        w = _Writer(f"orthoglide-{point}")
+    if variant in ("folded", "coupled"):
+        w = _Writer(f"orthoglide-{point}" if variant == "folded" else f"orthoglide-coupled-{point}")
+        k_c = parallelogram_spring()[5, 5] if variant == "coupled" else None
         for i in range(3):
-            _leg(w, f"leg{i + 1}", i, p, k_a, k_foot, 0.0, folded_spring(), r)
+            _leg(w, f"leg{i + 1}", i, p, k_a, k_foot, 0.0, folded_spring(), r, rp, k_c)
     elif variant == "2bar":
         w = _Writer(f"orthoglide-2bar-{point}")
         for i in range(3):
@@ -283,17 +331,22 @@ def orthoglide_urdf(point: str, variant: str = "folded", r: float = PLATFORM_R) 
                     sgn * D_AXLE / 2,
                     bar_spring(),
                     r,
+                    rp,
                 )
     else:
-        raise ValueError(f"unknown variant {variant!r}; choose 'folded' or '2bar'")
+        raise ValueError(f"unknown variant {variant!r}; choose 'folded', 'coupled' or '2bar'")
     w.tag("platform", {"name": "platform", "components": "x y z rx ry rz"})
     return w.text()
+
+
+#: Bundled variants and their file-name prefixes.
+VARIANTS = {"folded": "orthoglide", "coupled": "orthoglide-coupled", "2bar": "orthoglide-2bar"}
 
 
 def orthoglide_models() -> dict[str, str]:
     """File name → URDF text of every bundled Orthoglide model."""
     out = {}
-    for variant, prefix in (("folded", "orthoglide"), ("2bar", "orthoglide-2bar")):
+    for variant, prefix in VARIANTS.items():
         for point in POINTS:
             out[f"{prefix}-{point}.urdf"] = orthoglide_urdf(point, variant)
     return out

@@ -46,7 +46,7 @@ def _k_free(rs, eq=None) -> float:
 
 def test_committed_models_match_the_generator():
     generated = MO.orthoglide_models()
-    assert len(generated) == 10
+    assert len(generated) == 15
     for name, text in generated.items():
         path = ROOT / "models" / "urdf" / name
         assert path.is_file(), f"{name} missing: run scripts/make_orthoglide.py"
@@ -115,6 +115,26 @@ def test_rank_deficient_legs_aggregate_to_full_rank(name):
     kc = s @ rs.stiffness(eq) @ s
     ev = np.linalg.eigvalsh(0.5 * (kc + kc.T))
     assert ev.min() > 1e-7 * ev.max(), f"robot stiffness should be full rank: {ev}"
+
+
+def test_coupled_parallelogram_legs():
+    """The coupled variant: R1, R2 passive, Pa1 + Pa2 a spring pair. Each leg has rank 3 plus the
+    ε-soft parallelogram mobility; the coupler stiffness (d²/2)EA/L makes the platform rotation
+    several times stiffer than in the folded variant, and leaves the stiffness along u at Q0 as
+    calibrated (the coupler does not work there)."""
+    rs_c, rs_f = _rs("orthoglide-coupled-q0"), _rs("orthoglide-q0")
+    eq = rs_c.solve(np.zeros(6))
+    s = np.diag([1, 1, 1, 1 / MO.L_BAR, 1 / MO.L_BAR, 1 / MO.L_BAR])
+    for name, k in rs_c.leg_stiffnesses(eq).items():
+        ev = np.sort(np.linalg.eigvalsh(s @ (0.5 * (k + k.T)) @ s))[::-1]
+        assert ev[2] > 1e-3 * ev[0] and 0 < ev[3] < 1e-5 * ev[0] and ev[4] < 1e-12 * ev[0], (
+            name,
+            ev,
+        )
+    rot_c = np.linalg.eigvalsh(rs_c.stiffness()[3:, 3:]).min()
+    rot_f = np.linalg.eigvalsh(rs_f.stiffness()[3:, 3:]).min()
+    assert rot_c > 5 * rot_f
+    assert _k_free(rs_c) == pytest.approx(3.23e6, rel=1e-5)
 
 
 def test_unloaded_stiffness_order_against_table2():
