@@ -52,3 +52,26 @@ def test_help_on_every_command(capsys):
             main([name, "--help"])
         assert e.value.code == 0
         assert "usage" in capsys.readouterr().out
+
+
+def test_curve_matrices_match_analyze_on_the_traced_state(capsys):
+    """The loaded K_C at a curve point (curve --matrices) is the one of the traced equilibrium."""
+    from vjm_pin.solver import trace_curve
+
+    assert main(["curve", "paper-c-s", "--direction", "-1", "0", "0", "--max-deflection", "0.002", "--steps", "4",
+                 "--matrices", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    vm = resolve_model("paper-c-s")
+    curve = trace_curve(vm, [-1, 0, 0], 0.002, 4)
+    last = curve.points[-1]
+    k_cli = np.array(out["points"][-1]["stiffness_matrix"])
+    assert np.allclose(k_cli, loaded_stiffness(vm, last.equilibrium).stiffness, rtol=1e-8, atol=1e-12)
+    # the directional stiffness reported for the point is dᵀ K_C d
+    assert out["points"][-1]["stiffness"] == pytest.approx(k_cli[0, 0], rel=1e-8)
+
+
+def test_analyze_subdivide_refines_the_model(capsys):
+    assert main(["analyze", "paper-c-s", "--deflection", "-0.0001", "0", "0", "--subdivide", "2", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert len(out["theta"]) == 36  # 3 links × 2 sub-links × 6 springs
+    assert main(["analyze", "paper-c-s", "--deflection", "0", "0", "0", "--subdivide", "0"]) == 2

@@ -73,6 +73,13 @@ def add_parser(sub):
         default="eq30",
         help="stiffness formula (default eq30)",
     )
+    p.add_argument(
+        "--subdivide",
+        type=int,
+        default=1,
+        metavar="K",
+        help="split every beam link into K sub-links (models whose springs keep <vjm:beam>)",
+    )
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
     p.set_defaults(func=run)
 
@@ -182,6 +189,12 @@ def run(args) -> int:
     if is_parallel_model(args.model):  # parallel robots (<vjm:leg> tags): vjm_pin/cli/parallel_cmds.py
         return run_analyze(args)
     vm, robot = load_from_args(args)
+    if args.subdivide != 1:
+        from ..subdivide import subdivide_model
+
+        if args.subdivide < 1:
+            raise InputError(f"--subdivide must be a positive integer, got {args.subdivide}")
+        vm = subdivide_model(vm.urdf, args.subdivide)
     extra = args.payload is not None or args.gravity
     if extra and args.deflection is not None:
         raise InputError("--payload/--gravity take a --wrench (or none), not a --deflection")

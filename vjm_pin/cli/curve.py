@@ -54,6 +54,12 @@ def add_parser(sub):
         "--json", action="store_true", help="one JSON object {points, critical, branches} on stdout"
     )
     p.add_argument("--plot", metavar="OUT.png", help="write a force–deflection plot (PNG)")
+    p.add_argument(
+        "--matrices",
+        action="store_true",
+        help="also give the loaded 6x6 stiffness K_C (eq. 30) at every point (JSON: 'stiffness_matrix'); "
+        "in text, at the points just before and after each critical point",
+    )
     p.set_defaults(func=run)
 
 
@@ -93,13 +99,30 @@ def critical_dict(c) -> dict:
     }
 
 
-def curve_dict(vm, curve) -> dict:
+def stiffness_matrix(vm, p):
+    """Loaded K_C (6, 6) at a traced point (eq. 30), or None where it is singular/infinite."""
+    from ..exceptions import SingularStiffness
+    from ..solver import loaded_stiffness
+
+    try:
+        return loaded_stiffness(vm, p.equilibrium).stiffness
+    except SingularStiffness:
+        return None
+
+
+def curve_dict(vm, curve, matrices: bool = False) -> dict:
+    def pd(p):
+        d = point_dict(p)
+        if matrices:
+            d["stiffness_matrix"] = stiffness_matrix(vm, p)
+        return d
+
     return {
         "model": vm.name,
         "direction": curve.direction,
-        "points": [point_dict(p) for p in curve.points],
+        "points": [pd(p) for p in curve.points],
         "critical": [critical_dict(c) for c in curve.critical],
-        "branches": [[point_dict(p) for p in br] for br in curve.branches],
+        "branches": [[pd(p) for p in br] for br in curve.branches],
     }
 
 
@@ -155,7 +178,7 @@ def run(args) -> int:
             title=f"{vm.name}: force–deflection along {np.round(curve.direction, 3).tolist()}",
         )
     if args.json:
-        print(dump_json(curve_dict(vm, curve)))
+        print(dump_json(curve_dict(vm, curve, args.matrices)))
         return 0
     rot = bool(np.any(curve.direction[3:]))
     du, fu = ("rad", "N·m") if rot else ("m", "N")
@@ -176,6 +199,16 @@ def run(args) -> int:
             f"critical point: force {c.force:.8g} {fu} at deflection {c.deflection:.8g} {du}; "
             f"tangent stiffness {c.stiffness_before:.6g} -> {c.stiffness_after:.6g} {fu}/{du}"
         )
+    if args.matrices:
+        from .common import fmt_matrix
+
+        for c in curve.critical:
+            for label, idx in (("before", c.index - 1), ("after", c.index)):
+                if 0 <= idx < len(curve.points):
+                    p = curve.points[idx]
+                    k = stiffness_matrix(vm, p)
+                    print(f"loaded stiffness K_C {label} the critical point (deflection {p.deflection:.6g} {du}):")
+                    print(fmt_matrix(k) if k is not None else "  singular (infinite in some direction)")
     for i, br in enumerate(curve.branches):
         print(
             f"branch {i + 1}: {len(br)} points, {'unstable' if not any(p.stable for p in br) else 'mixed'}, "
