@@ -405,3 +405,17 @@ def test_default_scale_brings_small_deformation_to_view(chain):
     big = ref.copy()
     big[1] = 0.5
     assert default_scale(model, ref, [big]) == 1.0  # visible already: never shrunk
+
+
+def test_example_robot_data_robots_show_their_meshes():
+    """ur5 from example-robot-data: the VJM URDF keeps its <visual> meshes, and the viewer
+    uses them (DAE files resolved through package://); generated chains get primitives."""
+    from vjm_pin.cli.view import robot_geometry
+    from vjm_pin.registry import resolve_model
+
+    vm = resolve_model("ur5")
+    geom = robot_geometry(vm)
+    files = [g.meshPath for g in geom.geometryObjects]
+    assert geom.ngeoms >= 6 and any(f.endswith(".dae") for f in files)
+    chain = resolve_model("paper-c-s")
+    assert all(not g.meshPath.endswith((".dae", ".stl")) for g in robot_geometry(chain).geometryObjects)

@@ -1106,3 +1106,31 @@ def default_scale(
     mant = want / 10**exp
     nice = max(m for m in (1.0, 2.0, 5.0, 10.0) if m <= mant + 1e-12)
     return float(min(nice * 10**exp, max_scale))
+
+
+def package_dirs() -> list[str]:
+    """Folders where ``package://`` mesh URIs of ``example-robot-data`` robots resolve."""
+    dirs = []
+    try:
+        import example_robot_data as erd
+
+        robots = Path(erd.getModelPath("ur_description/urdf/ur5_robot.urdf")).resolve()
+        dirs += [str(robots.parent.parent), str(robots.parent), str(robots)]
+    except (ImportError, OSError):  # pragma: no cover - a declared dependency
+        pass
+    return dirs
+
+
+def mesh_geometry(model: pin.Model, urdf_text: str, extra_dirs=()) -> pin.GeometryModel | None:
+    """Visual geometry of a URDF that has ``<visual>`` meshes or primitives (e.g. the robots
+    of ``example-robot-data``, whose visuals the VJM generator keeps), or None when it has
+    none or they cannot be loaded (then use :func:`chain_geometry`)."""
+    if "<visual" not in urdf_text:
+        return None
+    try:
+        geom = pin.buildGeomFromUrdfString(
+            model, urdf_text, pin.GeometryType.VISUAL, package_dirs=[*extra_dirs, *package_dirs()]
+        )
+    except (ValueError, RuntimeError, OSError):
+        return None
+    return geom if geom.ngeoms else None

@@ -112,13 +112,21 @@ def _label(deflection_m: float, force_n: float, stable) -> str:
 
 
 def _scene(vm, frames_x, scale):
-    from ..viewer import chain_geometry, default_scale, magnify
+    from ..viewer import default_scale, magnify
 
     if scale is None:
         scale = default_scale(vm.model, vm.reference, frames_x)
     shown = [magnify(vm.reference, x, scale) for x in frames_x]
-    geom = chain_geometry(vm.model, vm.roles)
+    geom = robot_geometry(vm)
     return geom, shown, float(scale)
+
+
+def robot_geometry(vm):
+    """The robot's own visual meshes when its URDF has them (example-robot-data robots),
+    else clean primitives for generated chains (:func:`vjm_pin.viewer.chain_geometry`)."""
+    from ..viewer import chain_geometry, mesh_geometry
+
+    return mesh_geometry(vm.model, vm.urdf) or chain_geometry(vm.model, vm.roles)
 
 
 def curve_page(
@@ -227,7 +235,7 @@ def run(args) -> int:
             print(f"wrote {args.html}: {cp.frames} frames, deformation ×{cp.scale:g}")
             _maybe_open(args)
             return 0
-        from ..viewer import chain_geometry, default_scale, magnify
+        from ..viewer import default_scale, magnify
 
         xs = [vm.reference] + [np.asarray(p.equilibrium.x, float) for p in curve.points]
         scale = args.scale or default_scale(vm.model, vm.reference, xs)
@@ -238,7 +246,7 @@ def run(args) -> int:
         }
         return _serve(
             vm,
-            chain_geometry(vm.model, vm.roles),
+            robot_geometry(vm),
             [magnify(vm.reference, x, scale) for x in xs],
             scale,
             args,
