@@ -858,7 +858,8 @@ _PAGE = """<!DOCTYPE html>
   #meshcat-pane {{ width: 100vw; height: 100vh; overflow: hidden; }}
   #vjm-overlay {{ position: absolute; left: 8px; top: 8px; padding: 4px 8px;
     font: 14px/1.35 sans-serif; color: #fff; background: rgba(0, 0, 0, 0.45);
-    border-radius: 4px; pointer-events: none; white-space: pre; }}
+    border-radius: 4px; pointer-events: none; white-space: pre-wrap;
+    max-width: calc(100vw - 270px); }}  /* keep clear of meshcat's controls bar (top right) */
   #vjm-title {{ font-weight: bold; }}
 </style>
 </head>
