@@ -95,21 +95,22 @@ def _knmm(x):
 
 def table_unloaded(res: dict) -> str:
     lines = [
-        "| point | Table 2 [kN/mm] | folded, free [kN/mm] | folded / Table 2 | folded, rotation held | two-bar, free | two-bar / folded |",
-        "| --- | --- | --- | --- | --- | --- | --- |",
+        "| point | Table 2 [kN/mm] | folded, free [kN/mm] | folded / Table 2 | folded, rotation held | coupled, free | two-bar, free | two-bar / folded |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for q in POINTS:
-        f, t = res["folded"][q], res["2bar"][q]
+        f, c, t = res["folded"][q], res["coupled"][q], res["2bar"][q]
         lines.append(
             f"| {q.upper()} | {TABLE2[q][0]:.2f} | {f['k_free'] / 1e6:.2f} | "
             f"{f['k_free'] / 1e6 / TABLE2[q][0]:.2f} | {f['k_held'] / 1e6:.2f} | "
-            f"{t['k_free'] / 1e6:.2f} | {t['k_free'] / f['k_free']:.2f} |"
+            f"{c['k_free'] / 1e6:.2f} | {t['k_free'] / 1e6:.2f} | {t['k_free'] / f['k_free']:.2f} |"
         )
     order = lambda d: " > ".join(q.upper() for q in sorted(POINTS, key=lambda q: -d(q)))
     lines.append("")
     lines.append(
         f"Order, Table 2: {order(lambda q: TABLE2[q][0])}; folded model: "
-        f"{order(lambda q: res['folded'][q]['k_free'])}; two-bar model: "
+        f"{order(lambda q: res['folded'][q]['k_free'])}; coupled model: "
+        f"{order(lambda q: res['coupled'][q]['k_free'])}; two-bar model: "
         f"{order(lambda q: res['2bar'][q]['k_free'])}."
     )
     return "\n".join(lines)
@@ -140,10 +141,10 @@ def table_curves(res: dict, variant: str, smax: float) -> str:
 
 
 def table_offsets(sens: dict) -> str:
-    rs_ = sorted(sens)
+    rs_ = list(sens)
     head = (
         "| point | Table 2 F_cr [kN] | "
-        + " | ".join(f"r = {r * 1e3:g} mm: F_cr −u / +u [kN], k₀ [kN/mm]" for r in rs_)
+        + " | ".join(f"{v}, r = {r * 1e3:g} mm: F_cr −u / +u [kN], k₀ [kN/mm]" for v, r in rs_)
         + " |"
     )
     lines = [head, "| --- | --- |" + " --- |" * len(rs_)]
@@ -167,9 +168,9 @@ def figure(res: dict, sens: dict, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 5, figsize=(18, 3.8), sharey=False)
-    r_show = max(sens) if sens else None
+    r_show = max(r for v, r in sens if v == "folded") if sens else None
     for ax, q in zip(axes, POINTS):
-        for variant, style in (("folded", "-"), ("2bar", ":")):
+        for variant, style in (("folded", "-"), ("coupled", "-."), ("2bar", ":")):
             for name, color in (("-u", "C0"), ("+u", "C1")):
                 c = res[variant][q]["curves"][name]["curve"]
                 ax.plot(
@@ -181,7 +182,7 @@ def figure(res: dict, sens: dict, path: Path) -> None:
                 )
         if r_show is not None:
             for name, color in (("-u", "C2"), ("+u", "C3")):
-                row = sens[r_show][q]["curves"][name]
+                row = sens[("folded", r_show)][q]["curves"][name]
                 c = row["curve"]
                 ax.plot(
                     c.deflections * 1e3,
@@ -229,20 +230,22 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     smax = args.max_deflection * 1e-3
     mo = generator()
-    res = {"folded": {}, "2bar": {}}
-    for variant, prefix in (("folded", "orthoglide"), ("2bar", "orthoglide-2bar")):
+    res = {v: {} for v in mo.VARIANTS}
+    for variant, prefix in mo.VARIANTS.items():
         for q in POINTS:
             print(f"{variant} {q} ...", file=sys.stderr, flush=True)
             res[variant][q] = analyse(
                 ROOT / "models" / "urdf" / f"{prefix}-{q}.urdf", smax, args.steps
             )
     sens = {}
-    for r_mm in [float(x) for x in args.offsets.split(",") if x.strip()]:
+    offsets = [float(x) for x in args.offsets.split(",") if x.strip()]
+    cases = [("folded", r) for r in offsets] + [("coupled", max(offsets))] if offsets else []
+    for variant, r_mm in cases:
         r = r_mm * 1e-3
-        sens[r] = {}
+        sens[(variant, r)] = {}
         for q in POINTS:
-            print(f"folded r={r_mm:g} mm {q} ...", file=sys.stderr, flush=True)
-            sens[r][q] = analyse(mo.orthoglide_urdf(q, "folded", r), smax, args.steps)
+            print(f"{variant} r={r_mm:g} mm {q} ...", file=sys.stderr, flush=True)
+            sens[(variant, r)][q] = analyse(mo.orthoglide_urdf(q, variant, r), smax, args.steps)
     figure(res, sens, Path(args.figure))
     k_a = mo.calibrated_actuator()
     text = "\n\n".join(
@@ -256,12 +259,13 @@ def main(argv=None) -> int:
             '"rotation held" = uᵀK_C u):\n\n' + table_unloaded(res),
             "**Force–deflection along ±u, folded model (bundled, r = 0)**, Table 2 in brackets:\n\n"
             + table_curves(res, "folded", smax),
+            "**Same, coupled model (bundled, r = 0)**:\n\n" + table_curves(res, "coupled", smax),
             "**Same, two-bar model (bundled, r = 0)**:\n\n" + table_curves(res, "2bar", smax),
         ]
         + (
             [
-                "**Sensitivity to the platform offset r** (folded model regenerated with "
-                "`orthoglide_urdf(q, 'folded', r)`; first critical force along −u / +u within "
+                "**Sensitivity to the platform offset r** (models regenerated with "
+                "`orthoglide_urdf(q, variant, r)`; first critical force along −u / +u within "
                 f"{args.max_deflection:g} mm, and the unloaded stiffness k₀):\n\n"
                 + table_offsets(sens)
             ]
