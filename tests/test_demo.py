@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import importlib.util
 import re
-import shutil
 import subprocess
 
 import numpy as np
@@ -18,6 +17,8 @@ from vjm_pin.registry import resolve_model
 from vjm_pin.solver import EquilibriumSolver
 from vjm_pin.solver.curve import trace_curve
 from vjm_pin.viewer import default_scale, magnify
+
+from .browser import chromium, start_screenshot
 
 MODEL = "paper-c-s"
 DIRECTION = np.array([-1.0, 0, 0, 0, 0, 0])
@@ -130,32 +131,6 @@ def test_no_command_points_to_demo(capsys):
 
 
 # ----------------------------------------------------------------------------- browser
-def _chromium() -> str | None:
-    return shutil.which("chromium") or shutil.which("chromium-browser")
-
-
-def _screenshot(browser: str, url: str, png, profile) -> subprocess.Popen:
-    return subprocess.Popen(
-        [
-            browser,
-            "--headless",
-            "--no-sandbox",
-            "--disable-gpu",
-            "--use-gl=swiftshader",
-            "--enable-unsafe-swiftshader",
-            "--disable-background-networking",
-            "--disable-component-update",
-            "--disable-sync",
-            "--no-first-run",
-            f"--user-data-dir={profile}",
-            "--virtual-time-budget=4000",
-            "--window-size=800,600",
-            f"--screenshot={png}",
-            url,
-        ],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-    )
 
 
 def _green(img: np.ndarray) -> np.ndarray:
@@ -168,7 +143,7 @@ def test_browser_model_c_buckling_page(model_c, c_curve, tmp_path):
     """The exported Model C S-curve page, seen from the side (camera along −y: z is up in the
     picture, the chain's plane is edge-on): straight just before the critical frame, visibly
     bowed out of the plane (z) after it."""
-    browser = _chromium()
+    browser = chromium()
     if browser is None:
         pytest.skip("no chromium binary on PATH (apt-get install chromium)")
     from PIL import Image
@@ -179,7 +154,7 @@ def test_browser_model_c_buckling_page(model_c, c_curve, tmp_path):
     before, last = cp.critical_frame - 1, cp.frames - 1
     shots = {k: tmp_path / f"frame{k}.png" for k in (before, last)}
     procs = {
-        k: _screenshot(browser, f"{page.as_uri()}#frame={k}", png, tmp_path / f"p{k}")
+        k: start_screenshot(browser, f"{page.as_uri()}#frame={k}", png, tmp_path / f"p{k}")
         for k, png in shots.items()
     }
     for k, p in procs.items():

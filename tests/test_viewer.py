@@ -3,7 +3,6 @@ rendered in headless Chromium (skipped when no chromium binary is installed)."""
 
 from __future__ import annotations
 
-import shutil
 import subprocess
 import time
 
@@ -21,6 +20,8 @@ from vjm_pin.viewer import (
     export_html,
     magnify,
 )
+
+from .browser import chromium, start_screenshot
 
 # Three revolute joints, links of 0.4 m along x; j2 bends the chain out of the xy plane.
 CHAIN_URDF = """<robot name="chain3">
@@ -273,32 +274,6 @@ def test_export_html_is_self_contained(chain, tmp_path):
 
 
 # ----------------------------------------------------------------------------- browser
-def _chromium() -> str | None:
-    return shutil.which("chromium") or shutil.which("chromium-browser")
-
-
-def _start_screenshot(browser: str, url: str, png, profile) -> subprocess.Popen:
-    return subprocess.Popen(
-        [
-            browser,
-            "--headless",
-            "--no-sandbox",
-            "--disable-gpu",
-            "--use-gl=swiftshader",
-            "--enable-unsafe-swiftshader",
-            "--disable-background-networking",
-            "--disable-component-update",
-            "--disable-sync",
-            "--no-first-run",
-            f"--user-data-dir={profile}",
-            "--virtual-time-budget=4000",
-            "--window-size=800,600",
-            f"--screenshot={png}",
-            url,
-        ],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-    )
 
 
 def _colour_masks(img: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -310,7 +285,7 @@ def _colour_masks(img: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def test_browser_renders_animation(chain, tmp_path):
-    browser = _chromium()
+    browser = chromium()
     if browser is None:
         pytest.skip("no chromium binary on PATH (apt-get install chromium)")
     from PIL import Image
@@ -335,7 +310,7 @@ def test_browser_renders_animation(chain, tmp_path):
     shots = {k: tmp_path / f"frame{k}.png" for k in (0, 15)}
     t0 = time.time()
     procs = {
-        k: _start_screenshot(browser, f"{page.as_uri()}#frame={k}", png, tmp_path / f"profile{k}")
+        k: start_screenshot(browser, f"{page.as_uri()}#frame={k}", png, tmp_path / f"profile{k}")
         for k, png in shots.items()
     }
     for k, p in procs.items():
