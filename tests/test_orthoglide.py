@@ -171,6 +171,29 @@ def test_wrench_and_displacement_driven_agree_on_the_orthoglide():
     np.testing.assert_allclose(back.deflection, d, rtol=0, atol=1e-9)
 
 
+def test_loaded_robot_stiffness_matches_finite_differences():
+    """K_C = Σ K_C⁽ⁱ⁾ (eq. 30 per leg) of the loaded Orthoglide at Q3 (a corner, legs tilted)
+    against central differences of re-solved robot equilibria."""
+    from vjm_pin.kinematics import displace
+
+    rs = _rs("orthoglide-q3")
+    eq = rs.solve(np.concatenate([-2e-3 * U3, [2e-4, -1e-4, 3e-4]]))
+    kc = rs.stiffness(eq)
+    h = 1e-7
+    fd = np.zeros((6, 6))
+    for j in range(6):
+        dt = np.zeros(6)
+        dt[j] = h
+        fp = rs.solve(target=displace(eq.position, eq.rotation, dt), x0=eq).wrench
+        fm = rs.solve(target=displace(eq.position, eq.rotation, -dt), x0=eq).wrench
+        fd[:, j] = (fp - fm) / (2 * h)
+    s = np.diag([1, 1, 1, 1 / MO.L_BAR, 1 / MO.L_BAR, 1 / MO.L_BAR])  # every block in N/m
+    err = np.linalg.norm(s @ (fd - kc) @ s) / np.linalg.norm(s @ kc @ s)
+    assert err < 1e-4, f"relative error of K_C vs finite differences: {err:.2e}"
+    rot = np.linalg.norm(fd[3:, 3:] - kc[3:, 3:]) / np.linalg.norm(kc[3:, 3:])
+    assert rot < 1e-4, f"rotational block: relative error {rot:.2e}"
+
+
 def test_compression_softens_tension_stiffens():
     """The bars act as pendulums: the geometric term −P/L lowers the stiffness under
     compression (−u, towards the actuators) and raises it in tension (+u)."""
