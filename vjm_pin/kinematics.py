@@ -57,20 +57,35 @@ class KinematicState:
         """(nv, nv) ``H[i, j] = ∂(J[:, i]·F)/∂x_j`` for the 6-D wrench ``F`` (eq. 16)."""
         if self.hessian is None:
             raise ValueError("this KinematicState was evaluated without Hessian")
-        return np.tensordot(np.asarray(wrench, float), self.hessian, axes=(0, 0))
+        return contract_hessian(self.hessian, np.asarray(wrench, float))
+
+
+def contract_hessian(hessian: np.ndarray, wrench: np.ndarray) -> np.ndarray:
+    """``H[i, j] = Σ_k F_k hessian[k, i, j]`` (eq. 16) as one matrix–vector product on a
+    memory view of ``hessian`` (6, nv, nv), whichever its memory order."""
+    nv = hessian.shape[1]
+    if hessian.flags.c_contiguous:
+        return (wrench @ hessian.reshape(6, nv * nv)).reshape(nv, nv)
+    if hessian.flags.f_contiguous:  # the layout :func:`fix_hessian_layout` returns
+        return (hessian.T.reshape(nv * nv, 6) @ wrench).reshape(nv, nv).T
+    return np.tensordot(wrench, hessian, axes=(0, 0))
 
 
 class Kinematics:
     """Evaluates ``g``, ``J`` and the kinematic Hessian of the end frame of a model.
 
     Holds one ``pin.Data`` that is reused across calls (not thread-safe: one instance
-    per thread). The caller's ``pin.Model`` is never modified.
+    per thread). The caller's ``pin.Model`` is never modified. The last evaluation is
+    kept: asking again at the same configuration (bit for bit) returns the same
+    :class:`KinematicState` without calling Pinocchio (a curve point's final iterate is
+    the next solve's start, and its stiffness and stability are evaluated there too).
     """
 
     def __init__(self, model: pin.Model, frame_id: int):
         self.model = model
         self.data = model.createData()
         self.frame_id = int(frame_id)
+        self._last: tuple[bytes, KinematicState] | None = None
 
     def placement(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """End frame (position (3,) m, rotation (3, 3)) at configuration ``x``."""
@@ -79,7 +94,14 @@ class Kinematics:
         return m.translation.copy(), m.rotation.copy()
 
     def evaluate(self, x: np.ndarray, hessian: bool = True) -> KinematicState:
-        """Placement, Jacobian and (optionally) kinematic Hessian at ``x`` (nq,)."""
+        """Placement, Jacobian and (optionally) kinematic Hessian at ``x`` (nq,).
+
+        The returned state is shared with later calls at the same ``x``: do not modify it."""
+        x = np.asarray(x, dtype=float)
+        key = x.tobytes()
+        last = self._last
+        if last is not None and last[0] == key and (last[1].hessian is not None or not hessian):
+            return last[1]
         model, data, fid = self.model, self.data, self.frame_id
         pin.computeJointJacobians(model, data, x)
         pin.updateFramePlacement(model, data, fid)
@@ -93,7 +115,9 @@ class Kinematics:
                 np.asarray(pin.getFrameKinematicHessian(model, data, fid, pin.LOCAL_WORLD_ALIGNED)).reshape(6, nv, nv)
             )
         m = data.oMf[fid]
-        return KinematicState(m.translation.copy(), m.rotation.copy(), jac.copy(), hes)
+        state = KinematicState(m.translation.copy(), m.rotation.copy(), jac.copy(), hes)
+        self._last = (key, state)
+        return state
 
 
 def pose_error(p_target, r_target, p, r) -> np.ndarray:
