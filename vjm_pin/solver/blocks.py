@@ -50,20 +50,36 @@ def full_wrench(vm: VjmModel, f_task: np.ndarray) -> np.ndarray:
 def evaluate_blocks(
     vm: VjmModel, kin: Kinematics, x: np.ndarray, wrench: np.ndarray, state: KinematicState | None = None
 ) -> Blocks:
-    """Evaluate :class:`Blocks` at configuration ``x`` (nq,) under the 6-D ``wrench`` (N, N·m)."""
+    """Evaluate :class:`Blocks` at configuration ``x`` (nq,) under the 6-D ``wrench`` (N, N·m).
+
+    The last result is kept on ``kin``: the same model, ``x`` and ``wrench`` (bit for bit)
+    return the same (read-only by convention) :class:`Blocks` — the stability check of an
+    equilibrium and the stiffness of a curve point share one evaluation."""
+    x = np.asarray(x, dtype=float)
+    wrench = np.asarray(wrench, dtype=float)
+    key = x.tobytes() + wrench.tobytes()
+    last = getattr(kin, "_blocks_last", None)
+    if last is not None and last[0] is vm and last[1] == key:
+        return last[2]
     if state is None or state.hessian is None:
         state = kin.evaluate(x, hessian=True)
+    nt = len(vm.theta_idx)
+    free = np.concatenate([vm.theta_idx, vm.q_idx])
     task = list(vm.task)
-    jt = state.jacobian[task]
-    ti, qi = vm.theta_idx, vm.q_idx
-    h = state.psi_hessian(wrench)
-    return Blocks(
-        J_theta=jt[:, ti],
-        J_q=jt[:, qi],
-        H_tt=h[np.ix_(ti, ti)],
-        H_tq=h[np.ix_(ti, qi)],
-        H_qt=h[np.ix_(qi, ti)],
-        H_qq=h[np.ix_(qi, qi)],
+    jz = state.jacobian[task][:, free]
+    hz = state.psi_hessian(wrench)[np.ix_(free, free)]  # (θ, q) order; the blocks are views
+    b = Blocks(
+        J_theta=jz[:, :nt],
+        J_q=jz[:, nt:],
+        H_tt=hz[:nt, :nt],
+        H_tq=hz[:nt, nt:],
+        H_qt=hz[nt:, :nt],
+        H_qq=hz[nt:, nt:],
         K_theta=vm.K_theta,
         state=state,
     )
+    try:
+        kin._blocks_last = (vm, key, b)
+    except AttributeError:  # a kinematics object with __slots__: no cache
+        pass
+    return b
