@@ -54,6 +54,39 @@ def null_space(J_theta: np.ndarray, J_q: np.ndarray, rank_tol: float = RANK_TOL)
     return vt[rank:].T.copy()
 
 
+def _null_space_fast(J_theta: np.ndarray, J_q: np.ndarray, rank_tol: float = RANK_TOL) -> np.ndarray:
+    """A basis of the same null space as :func:`null_space`, cheaper: the complete QR of
+    ``[J_θ J_q]ᵀ = Q R``; the singular values of the small ``R`` are those of
+    ``[J_θ J_q]``, so the rank test is the same; at full row rank the last columns of
+    ``Q`` span the null space (another orthonormal basis: eq. 23's eigenvalues do not
+    depend on it). Falls back to the SVD when the rank is deficient."""
+    a = np.hstack([J_theta, J_q])
+    m, n = a.shape
+    if m == 0 or m >= n:
+        return null_space(J_theta, J_q, rank_tol)
+    q, r = np.linalg.qr(a.T, mode="complete")
+    s = np.linalg.svd(r[:m], compute_uv=False)
+    if not s.min() > rank_tol * max(s.max(), 1e-300):
+        return null_space(J_theta, J_q, rank_tol)
+    return q[:, m:]
+
+
+_NORMS: dict[int, tuple[np.ndarray, np.ndarray, float]] = {}
+
+
+def spectral_norm(k: np.ndarray) -> float:
+    """``‖K‖₂`` (largest singular value), remembered per array (a model's ``K_θ`` is the
+    same array at every stability check); recomputed if the array changed."""
+    hit = _NORMS.get(id(k))
+    if hit is not None and hit[0] is k and np.array_equal(hit[1], k):
+        return hit[2]
+    value = float(np.linalg.norm(k, 2)) if k.size else 1.0
+    if len(_NORMS) >= 64:
+        _NORMS.pop(next(iter(_NORMS)))
+    _NORMS[id(k)] = (k, k.copy(), value)
+    return value
+
+
 def reduced_matrix(b: Blocks, basis: np.ndarray | None = None) -> np.ndarray:
     """The matrix of eq. (23): ``Vᵀ [[H_θθ − K_θ, H_θq], [H_qθ, H_qq]] V`` (symmetric part)."""
     if basis is None:
@@ -78,10 +111,10 @@ def check_stability(b: Blocks, tol: float = STABILITY_TOL) -> StabilityResult:
     quadratic form only sees the symmetric part. The threshold is relative:
     ``tol · ‖K_θ‖₂``.
     """
-    basis = null_space(b.J_theta, b.J_q)
+    basis = _null_space_fast(b.J_theta, b.J_q)
     m = reduced_matrix(b, basis)
     ev = np.linalg.eigvalsh(m) if m.size else np.zeros(0)
-    scale = np.linalg.norm(b.K_theta, 2) if b.K_theta.size else 1.0
+    scale = spectral_norm(b.K_theta) if b.K_theta.size else 1.0
     thr = tol * scale
     stable = bool(ev.size == 0 or ev.max() < -thr)
     return StabilityResult(stable, ev, basis.shape[1], float(thr))
