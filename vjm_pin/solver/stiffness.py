@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import lapack as _lapack
 
 from ..exceptions import SingularStiffness
 from .blocks import Blocks
@@ -50,17 +51,24 @@ class StiffnessResult:
 
 
 def _equilibrate(a: np.ndarray, sweeps: int = 4) -> np.ndarray:
+    return _ruiz(a, sweeps)[0]
+
+
+def _ruiz(a: np.ndarray, sweeps: int = 4) -> tuple[np.ndarray, np.ndarray]:
     """Symmetric Ruiz scaling ``D A D`` (rows and columns to unit max-norm): VJM matrices
     mix axial link stiffness (~1e9) with Jacobian entries (~1), so conditioning must be
-    judged on the scaled matrix."""
+    judged on the scaled matrix. The sweeps run on ``|A|`` (scaling by positive factors
+    commutes with the absolute value) and ``D`` is applied to ``A`` once at the end."""
+    s = np.abs(a)
     d = np.ones(a.shape[0])
-    s = a.copy()
     for _ in range(sweeps):
-        r = np.sqrt(np.maximum(np.abs(s).max(axis=1), np.abs(s).max(axis=0)))
+        r = np.sqrt(np.maximum(s, s.T).max(axis=1))  # max of row i and column i
         r[r == 0] = 1.0
-        s = s / r[:, None] / r[None, :]
-        d /= r
-    return s
+        r = 1.0 / r
+        s *= r[:, None]
+        s *= r
+        d *= r
+    return a * d[:, None] * d, d
 
 
 def _rcond(a: np.ndarray) -> float:
@@ -69,6 +77,33 @@ def _rcond(a: np.ndarray) -> float:
         return 1.0
     s = np.linalg.svd(_equilibrate(a), compute_uv=False)
     return float(s.min() / s.max()) if s.max() > 0 else 0.0
+
+
+def _inverse_if_regular(a: np.ndarray):
+    """``(A⁻¹, True)`` when ``_rcond(a) ≥ SINGULAR_RCOND`` is certain without an SVD, else
+    ``(None, False)`` (then the caller applies :func:`_rcond` itself).
+
+    With the equilibrated ``S = D A D`` and its inverse from one LU, the Hölder bounds
+    ``‖S‖₂ ≤ √(‖S‖₁‖S‖∞)`` (and the same for ``S⁻¹``) give a lower bound of the reciprocal
+    2-norm condition number that :func:`_rcond` computes exactly; when it clears the
+    threshold (with a factor 10 for the rounding of ``S⁻¹``) the matrix is regular and
+    ``A⁻¹ = D S⁻¹ D``. Near-singular matrices go to the exact test."""
+    n = a.shape[0]
+    if n == 0:
+        return None, False
+    s, d = _ruiz(a)
+    lu, piv, info = _lapack.dgetrf(s)
+    if info:
+        return None, False
+    inv, info = _lapack.dgetri(lu, piv)
+    if info or not np.isfinite(inv).all():
+        return None, False
+    sa, ia = np.abs(s), np.abs(inv)
+    norm_s = np.sqrt(sa.sum(axis=0).max() * sa.sum(axis=1).max())
+    norm_i = np.sqrt(ia.sum(axis=0).max() * ia.sum(axis=1).max())
+    if not norm_s * norm_i * SINGULAR_RCOND * 10.0 <= 1.0:
+        return None, False
+    return inv * d[:, None] * d, True
 
 
 def _diagnose(b: Blocks, what: str) -> str:
@@ -92,7 +127,11 @@ def _diagnose(b: Blocks, what: str) -> str:
 def _embed(vm_task, kc, kq, kt, method) -> StiffnessResult:
     task = list(vm_task)
     k6 = np.zeros((6, 6))
-    k6[np.ix_(task, task)] = kc
+    if task and task == list(range(task[0], task[-1] + 1)):
+        task = slice(task[0], task[-1] + 1)  # contiguous components: plain slices
+        k6[task, task] = kc
+    else:
+        k6[np.ix_(task, task)] = kc
     q6 = np.zeros((kq.shape[0], 6))
     q6[:, task] = kq
     t6 = np.zeros((kt.shape[0], 6))
@@ -127,12 +166,16 @@ def stiffness_eq30(b: Blocks, task=(0, 1, 2, 3, 4, 5)) -> StiffnessResult:
     :class:`SingularStiffness` says which.
     """
     a = eq28_matrix(b)
-    if _rcond(a) < SINGULAR_RCOND:
-        raise SingularStiffness(_diagnose(b, "the matrix of eq. (28)"), np.linalg.svd(a, compute_uv=False))
     m, nq = b.J_theta.shape[0], b.J_q.shape[1]
-    rhs = np.zeros((a.shape[0], m))
-    rhs[:m] = np.eye(m)
-    x = np.linalg.solve(a, rhs)
+    inv, regular = _inverse_if_regular(a)
+    if regular:
+        x = inv[:, :m]  # the right-hand side is [I_m; 0]
+    else:
+        if _rcond(a) < SINGULAR_RCOND:
+            raise SingularStiffness(_diagnose(b, "the matrix of eq. (28)"), np.linalg.svd(a, compute_uv=False))
+        rhs = np.zeros((a.shape[0], m))
+        rhs[:m] = np.eye(m)
+        x = np.linalg.solve(a, rhs)
     return _embed(task, x[:m], x[m : m + nq], x[m + nq :], "eq30")
 
 
