@@ -22,6 +22,15 @@ Two iterations are offered:
     decreases the ℓ₁ merit ``E + ρ‖t − g‖₁`` or, when it is an unmodified Newton step,
     the residual of eq. (5); an energy-increasing step is never taken.
 
+    Every Newton attempt first tries the plain local iteration (:meth:`EquilibriumSolver._fast_newton`):
+    unmodified Newton steps of eq. (28) from the start, without restoration, taken only
+    while the reduced Hessian is positive definite (stable branch followed) and the step
+    is within the step limit, and kept only if the residual of eq. (5) at least halves at
+    every step and the converged equilibrium is stable. These are exactly the steps the
+    safeguarded iteration accepts by its residual test; when any condition fails the
+    attempt restarts from the same start on the safeguarded path. A warm start from a
+    neighbouring equilibrium (curve tracing) usually converges in one or two such steps.
+
 Both are wrapped in continuation (``t_i = α_i t + (1−α_i) t₀``, eq. after 10) and
 perturbed restarts (small seeded random noise on ``(q, θ)``, §4.1) when an iteration
 stalls or converges to an unstable equilibrium. The result says which path was used.
@@ -29,16 +38,18 @@ stalls or converges to an unstable equilibrium. The result says which path was u
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pinocchio as pin
+from scipy.linalg import lapack as _lapack
 
 from ..exceptions import InputError, NoEquilibrium, SingularStiffness
-from ..kinematics import Kinematics, deflection, displace, pose_error
+from ..kinematics import Kinematics, contract_hessian, deflection, displace, pose_error
 from ..model import VjmModel
 from .blocks import evaluate_blocks, full_wrench
-from .stability import StabilityResult, check_stability, null_space
+from .stability import RANK_TOL, STABILITY_TOL, StabilityResult, check_stability, null_space, spectral_norm
 from .stiffness import stiffness_from_blocks
 
 METHODS = ("newton", "fixed-point")
@@ -87,6 +98,15 @@ class EquilibriumResult:
     def residual(self) -> float:
         """Largest of the three residual norms (mixed units; 0 at an exact equilibrium)."""
         return float(max(self.residuals.values())) if self.residuals else float("nan")
+
+
+def _singular_values(a: np.ndarray) -> np.ndarray:
+    """Singular values of a small matrix (LAPACK ``gesdd`` directly; numpy's wrapper costs more)."""
+    if a.size:
+        _, sv, _, info = _lapack.dgesdd(a, compute_uv=0)
+        if not info:
+            return sv
+    return np.linalg.svd(a, compute_uv=False)
 
 
 def _as_target(vm, kin, p0, r0, deflection_=None, target=None):
@@ -167,6 +187,17 @@ class EquilibriumSolver:
         self._err_scale = np.where(np.array(self.task) < 3, self.length_scale, 1.0)
         self._rows_p = [i for i, t in enumerate(self.task) if t < 3]
         self._rows_r = [i for i, t in enumerate(self.task) if t >= 3]
+        # the fast local Newton path: (θ, q)-ordered gathers of J and H by precomputed indices
+        nv = vm.model.nv
+        self._kz = np.zeros((len(self.free),) * 2)
+        self._kz[: self.nt, : self.nt] = vm.K_theta
+        self._hidx = (self.free[:, None] * nv + self.free[None, :]).ravel()
+        self._all_task = self.task == [0, 1, 2, 3, 4, 5]
+        self._ip = np.array(self._rows_p, int)
+        self._ir = np.array(self._rows_r, int)
+        self._triu = np.triu(np.ones((len(self.task),) * 2))
+        self._fast_max_iter = 8
+        self._fast_cache: tuple[bytes, dict, StabilityResult | None] | None = None
 
     # ----------------------------------------------------------------- helpers
     def energy(self, x: np.ndarray) -> float:
@@ -204,6 +235,119 @@ class EquilibriumSolver:
             return self._fixed_point(x, f, p_t, r_t, max_iter)
         return self._newton(x, f, p_t, r_t, max_iter)
 
+    def _fast_newton(self, x, p_t, r_t):
+        """Plain local Newton on eq. (5) from ``x``; None when it must give way to the
+        safeguarded iteration (see the module docstring).
+
+        Each iteration: ``J`` and the Hessian at ``x`` (one Pinocchio evaluation), the
+        complete QR ``Jᵀ = [Y Z] [R; 0]`` (``Z``: null space of eq. 20–21; the singular
+        values of ``R`` are those of ``J``, checked against :data:`RANK_TOL`), the
+        least-squares multiplier ``F = R⁻¹ Yᵀ ∇E`` (as the safeguarded path), the
+        residual test of :meth:`_residuals`, then the Newton step of eq. (28),
+        ``[[W, −Jᵀ], [J, 0]] [δx; δF] = [−r; e]`` with ``W = K − H(F)``, solved in the
+        null-space form ``Rᵀ p_Y = e``, ``(ZᵀWZ) p_Z = −Zᵀ(r + W Y p_Y)``. The positive
+        definiteness of ``ZᵀWZ`` (symmetric part, margin ``1e-8·max|K_θ|``) is the
+        condition of the safeguarded path for an unmodified step; at convergence its
+        negative is the matrix of eq. (23), so the stability verdict comes for free.
+
+        Returns (x, f, iterations, state) with the verdict cached for :meth:`_result`.
+        """
+        vm, kin, kz, task, free = self.vm, self.kin, self._kz, self.task, self.free
+        ti, th0, kt, nt = vm.theta_idx, vm.theta0, vm.K_theta, self.nt
+        m, n = len(task), len(free)
+        if m == 0 or m >= n:
+            return None
+        tol = self.tol
+        tol_p = tol * self.length_scale
+        kscale = max(self.kscale, 1e-300)
+        stat_floor = 1e-6 * self.kscale
+        shift = 1e-8 * self.kscale
+        diag = np.arange(n - m) * (n - m + 1)
+        ip, ir, escale = self._ip, self._ir, self._err_scale
+        rot = ir.size > 0  # log3 only when orientation rows are constrained
+        rows = None if self._all_task else task
+        pt = np.asarray(p_t, float)
+        rt = np.asarray(r_t, float)
+        kkt_prev = np.inf
+        x = np.array(x, dtype=float)
+        f6 = np.zeros(6)
+        tau = np.zeros(n)
+        qfull = np.zeros((n, n), order="F")
+        # LAPACK directly: numpy.linalg's wrappers cost more than these small factorisations
+        for it in range(self._fast_max_iter + 1):
+            st = kin.evaluate(x)
+            if st.hessian is None:
+                return None
+            jac = st.jacobian if rows is None else st.jacobian[rows]
+            jac = jac.take(free, axis=1)
+            if rot:
+                e = np.concatenate([pt - st.position, pin.log3(rt @ st.rotation.T)])
+                if rows is not None:
+                    e = e[rows]
+            else:
+                e = (pt - st.position)[task]
+            tau[:nt] = kt @ (x[ti] - th0)  # ∇E: K_θ(θ − θ₀), 0 for q
+            # complete QR of Jᵀ (n × m): Q = [Y Z], R = upper triangle of qr[:m]
+            qr, tq, _, info = _lapack.dgeqrf(jac.T)
+            qfull[:, :m] = qr
+            qf, _, info2 = _lapack.dorgqr(qfull, tq)
+            rr = qr[:m] * self._triu
+            _, sv, _, info3 = _lapack.dgesdd(rr, compute_uv=0)
+            if info or info2 or info3 or not sv.min() > RANK_TOL * sv.max():
+                return None
+            y, z = qf[:, :m], qf[:, m:]
+            f, info = _lapack.dtrtrs(rr, y.T @ tau)  # least-squares multiplier
+            if info:
+                return None
+            r = tau - jac.T @ f
+            ae = np.abs(e)
+            ep = ae[ip].max() if ip.size else 0.0
+            er = ae[ir].max() if rot else 0.0
+            rs = np.abs(r).max()
+            es = e / escale
+            kkt = math.sqrt(es @ es) + math.sqrt(r @ r) / kscale
+            f6[task] = f
+            hz = contract_hessian(st.hessian, f6).take(self._hidx).reshape(n, n)
+            # the test of _residuals, with the end placed as accurately as the safeguarded
+            # path's restoration places it (0.01·tol): wrench-driven loops (eq. 11) rely on it
+            if ep <= 0.01 * tol_p and er <= 0.01 * tol and rs <= tol * max(np.abs(tau).max(), stat_floor):
+                res = {"position": float(ep), "orientation": float(er), "statics": float(rs)}
+                # eq. (23) in the basis Z (its eigenvalues do not depend on the basis)
+                red = z.T @ (hz - kz) @ z
+                ev, _, info = _lapack.dsyevd(0.5 * (red + red.T), compute_v=0)
+                if info:
+                    return None
+                thr = STABILITY_TOL * (spectral_norm(kt) if kt.size else 1.0)
+                stab = StabilityResult(bool(ev.size == 0 or ev.max() < -thr), ev, n - m, float(thr))
+                if self.follow_stable and not stab.stable:
+                    self._fast_its = it
+                    return None
+                self._fast_cache = (x.tobytes() + f6.tobytes() + pt.tobytes() + rt.tobytes(), res, stab)
+                return x, f, it, st
+            self._fast_its = it
+            if it and not kkt < 0.5 * kkt_prev or it == self._fast_max_iter:
+                return None
+            w = kz - hz
+            red = z.T @ w @ z
+            if self.follow_stable:
+                sym = 0.5 * (red + red.T)
+                sym.flat[diag] -= shift
+                if _lapack.dpotrf(sym)[1]:
+                    return None  # not positive definite: the safeguarded path shifts it
+            py, info = _lapack.dtrtrs(rr, e, trans=1)  # Rᵀ p_Y = e
+            dy = y @ py
+            _, _, pz, info2 = _lapack.dgesv(red, z.T @ (r + w @ dy), overwrite_b=1)
+            if info or info2:
+                return None
+            dx = dy - z @ pz
+            big = np.abs(dx / self.var_scale).max()
+            if not big <= self.max_step:  # also catches NaN
+                return None
+            x = x.copy()
+            x[free] += dx
+            kkt_prev = kkt
+        return None
+
     def _newton(self, x, f, p_t, r_t, max_iter):
         """Newton on eq. (5) (matrix of eq. 28), kept on the constraint ``g = t``.
 
@@ -213,7 +357,17 @@ class EquilibriumSolver:
         the step descends the energy, and a step is accepted only if the energy does not
         increase (Armijo), or, for an unmodified Newton step, if the residual of eq. (5)
         falls. With ``follow_stable=False`` full Newton steps are taken (unstable branches).
+        The plain local iteration (:meth:`_fast_newton`) is tried first.
         """
+        self._fast_its = 0
+        fast = self._fast_newton(x, p_t, r_t)
+        if fast is not None:
+            xf, ff, itf, stf = fast
+            return xf, ff, itf, True, stf
+        x, f, it, ok, state = self._newton_safeguarded(x, f, p_t, r_t, max_iter)
+        return x, f, it + self._fast_its, ok, state
+
+    def _newton_safeguarded(self, x, f, p_t, r_t, max_iter):
         vm = self.vm
         kz = np.zeros((len(self.free), len(self.free)))
         kz[: self.nt, : self.nt] = vm.K_theta
@@ -356,10 +510,16 @@ class EquilibriumSolver:
     # ----------------------------------------------------------------- public
     def _result(self, x, f, iters, ok, state, p_t, r_t, path, with_stability=True) -> EquilibriumResult:
         vm = self.vm
-        _, _, _, _, res, _ = self._residuals(x, f, state, p_t, r_t)
         w6 = full_wrench(vm, f)
-        stab = None
-        if with_stability and ok:
+        fc = self._fast_cache
+        if fc is not None and fc[0] == x.tobytes() + w6.tobytes() + p_t.tobytes() + r_t.tobytes():  # by _fast_newton
+            res, stab = dict(fc[1]), fc[2]
+        else:
+            _, _, _, _, res, _ = self._residuals(x, f, state, p_t, r_t)
+            stab = None
+        if not (with_stability and ok):
+            stab = None
+        elif stab is None:
             stab = check_stability(evaluate_blocks(vm, self.kin, x, w6, state))
         return EquilibriumResult(
             x=x.copy(),
@@ -378,6 +538,10 @@ class EquilibriumSolver:
         )
 
     def _perturb(self, x, rng):
+        if not isinstance(rng, np.random.Generator):  # a one-element box: created when first needed
+            if not rng:
+                rng.append(np.random.default_rng(self.seed))
+            rng = rng[0]
         xn = x.copy()
         noise = rng.standard_normal(len(self.free)) * self.perturbation
         noise = np.where(self.var_scale > 1.0, noise * 1e-3 * self.length_scale, noise)
@@ -413,7 +577,7 @@ class EquilibriumSolver:
         f_start = np.zeros(len(self.task)) if wrench0 is None else np.asarray(wrench0, float)[self.task]
         if not np.all(np.isfinite(f_start)):
             raise InputError("wrench0 contains NaN or infinite values")
-        rng = np.random.default_rng(self.seed)
+        rng = []  # the restart noise generator, seeded with ``seed`` when first used
         total = 0
         best = None
         name = self.method
@@ -444,13 +608,13 @@ class EquilibriumSolver:
         # A start where the end cannot move in some constrained direction (e.g. a straight
         # chain of rigid links) gives a singular eq. (28)/(10) matrix: perturb it first (§4.1).
         jz0 = self.kin.evaluate(x_start, hessian=False).jacobian[self.task][:, self.free]
-        sv = np.linalg.svd(jz0, compute_uv=False)
+        sv = _singular_values(jz0)
         if sv.size < len(self.task) or sv.min() <= 1e-9 * max(sv.max(), 1e-300):
             x_start = self._perturb(x_start, rng)
             name += "+perturbed-start"
         res = attempt(x_start, f_start, name)
         if res.converged and (res.stable or not self.follow_stable):
-            return replace(res, iterations=total)
+            return res if res.iterations == total else replace(res, iterations=total)
         best = res
         for k in range(1, self.restarts + 1):
             xr = self._perturb(x_start if not res.converged else res.x, rng)
