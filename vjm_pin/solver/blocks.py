@@ -78,8 +78,14 @@ def evaluate_blocks(
         K_theta=vm.K_theta,
         state=state,
     )
+    remember_blocks(vm, kin, x, wrench, b)
+    return b
+
+
+def remember_blocks(vm: VjmModel, kin: Kinematics, x: np.ndarray, wrench: np.ndarray, b: Blocks) -> None:
+    """Make ``b`` (evaluated at ``x`` under the 6-D ``wrench`` by the caller, in the layout of
+    :func:`evaluate_blocks`) the kept result of ``kin`` for :func:`evaluate_blocks`."""
     try:
-        kin._blocks_last = (vm, key, b)
+        kin._blocks_last = (vm, np.asarray(x, float).tobytes() + np.asarray(wrench, float).tobytes(), b)
     except AttributeError:  # a kinematics object with __slots__: no cache
         pass
-    return b

@@ -48,7 +48,7 @@ from scipy.linalg import lapack as _lapack
 from ..exceptions import InputError, NoEquilibrium, SingularStiffness
 from ..kinematics import Kinematics, contract_hessian, deflection, displace, pose_error
 from ..model import VjmModel
-from .blocks import evaluate_blocks, full_wrench
+from .blocks import Blocks, evaluate_blocks, full_wrench, remember_blocks
 from .stability import RANK_TOL, STABILITY_TOL, StabilityResult, check_stability, null_space, spectral_norm
 from .stiffness import stiffness_from_blocks
 
@@ -323,6 +323,10 @@ class EquilibriumSolver:
                     self._fast_its = it
                     return None
                 self._fast_cache = (x.tobytes() + f6.tobytes() + pt.tobytes() + rt.tobytes(), res, stab)
+                # the Blocks at this equilibrium, as evaluate_blocks would build them (the
+                # stiffness of a curve point is evaluated here next)
+                blocks = Blocks(jac[:, :nt], jac[:, nt:], hz[:nt, :nt], hz[:nt, nt:], hz[nt:, :nt], hz[nt:, nt:], kt, st)
+                remember_blocks(vm, kin, x, f6, blocks)
                 return x, f, it, st
             self._fast_its = it
             if it and not kkt < 0.5 * kkt_prev or it == self._fast_max_iter:
@@ -536,6 +540,22 @@ class EquilibriumSolver:
             path=path,
             stability=stab,
         )
+
+    def _solve_local(self, deflection, x0: np.ndarray) -> EquilibriumResult | None:
+        """The plain local Newton iteration alone (:meth:`_fast_newton`) from ``x0``: its
+        equilibrium when it converges to an acceptable one (stable when ``follow_stable``),
+        else None and the caller solves as usual. No safeguards, restarts or continuation:
+        for a predicted start (tangent predictor of :func:`~vjm_pin.solver.trace_curve`).
+        ``self._fast_its`` holds the iterations spent when it returns None."""
+        self._fast_its = 0
+        if self.method != "newton":
+            return None
+        p_t, r_t = _as_target(self.vm, self.kin, self.p0, self.r0, deflection, None)
+        out = self._fast_newton(np.asarray(x0, float), p_t, r_t)
+        if out is None:
+            return None
+        x, f, it, st = out
+        return self._result(x, f, it, True, st, p_t, r_t, "newton+tangent-predictor")
 
     def _perturb(self, x, rng):
         if not isinstance(rng, np.random.Generator):  # a one-element box: created when first needed
