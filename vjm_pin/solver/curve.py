@@ -31,7 +31,7 @@ rigid point, the limit of the post-critical force).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -156,11 +156,16 @@ def tangent_stiffness(
     ``inf`` when the end cannot move along ``d`` to first order ([J_θ J_q] does not reach
     ``d``: a straight chain of rigid links), ``nan`` when K_C is singular otherwise.
     """
+    return _stiffness_along(vm, eq, direction, kin)[0]
+
+
+def _stiffness_along(vm, eq: EquilibriumResult, direction: np.ndarray, kin):
+    """(:func:`tangent_stiffness`, the :class:`StiffnessResult` of eq. 30 or None when singular)."""
     from . import blocks_at
 
-    b = blocks_at(vm, eq.x, eq.wrench, kin)
+    b = blocks_at(vm, eq.x, eq.wrench, kin)  # kept by the solver when it evaluated them
     try:
-        k = stiffness_from_blocks(b, vm.task, "eq30").stiffness
+        st = stiffness_from_blocks(b, vm.task, "eq30")
     except SingularStiffness:
         task = list(vm.task)
         jall = np.hstack([b.J_theta, b.J_q])
@@ -168,20 +173,41 @@ def tangent_stiffness(
         u, s, _ = np.linalg.svd(jall, full_matrices=True)
         rank = int(np.sum(s > RANK_TOL * max(s.max() if s.size else 0.0, 1e-300)))
         if np.linalg.norm(u[:, rank:].T @ dt) > 1e-6:
-            return float("inf")
-        return float("nan")
-    return float(direction @ k @ direction)
+            return float("inf"), None
+        return float("nan"), None
+    return float(direction @ st.stiffness @ direction), st
 
 
 def _point(vm, eq: EquilibriumResult, s: float, d: np.ndarray, kin) -> CurvePoint:
-    return CurvePoint(
+    return _point_and_stiffness(vm, eq, s, d, kin)[0]
+
+
+def _point_and_stiffness(vm, eq: EquilibriumResult, s: float, d: np.ndarray, kin):
+    k, st = _stiffness_along(vm, eq, d, kin)
+    point = CurvePoint(
         deflection=float(s),
         force=float(d @ eq.wrench),
         wrench=np.asarray(eq.wrench, float).copy(),
         stable=bool(eq.stable),
-        stiffness=tangent_stiffness(vm, eq, d, kin),
+        stiffness=k,
         equilibrium=eq,
     )
+    return point, st
+
+
+def _predicted(vm, solver: EquilibriumSolver, a: CurvePoint, st, s: float, d: np.ndarray):
+    """Equilibrium at ``s`` from the tangent predictor of the stable point ``a``: its
+    configuration moved by eq. (29), ``δq = K_q δt``, ``δθ = K_θ δt`` with ``δt = (s − s_a) d``,
+    then the plain local Newton iteration only. None when that does not give an acceptable
+    equilibrium: the caller then solves from ``a`` itself, as without a predictor."""
+    dt = (s - a.deflection) * d
+    x0 = a.equilibrium.x.copy()
+    x0[vm.theta_idx] += st.dtheta_dt @ dt
+    x0[vm.q_idx] += st.dq_dt @ dt
+    if not np.all(np.isfinite(x0)):
+        return None, 0
+    eq = solver._solve_local(s * d, x0)
+    return eq, solver._fast_its
 
 
 def _is_drop(k_a: float, k_b: float) -> bool:
@@ -524,12 +550,20 @@ def trace_curve(
     points: list[CurvePoint] = []
     critical: list[CriticalPoint] = []
     prev = None
+    prev_stiffness = None  # StiffnessResult of the last point (tangent predictor)
+    task = list(vm.task)
     for i, s in enumerate(s_grid):
         if prev is None:
             eq = _unloaded(vm, solver, d, kin) or solver.solve(s * d)
         else:
-            eq = solver.solve(s * d, x0=prev.x, wrench0=prev.wrench[list(vm.task)])
-        p = _point(vm, eq, s, d, kin)
+            eq, spent = None, 0
+            if prev_stiffness is not None and points[-1].stable:
+                eq, spent = _predicted(vm, solver, points[-1], prev_stiffness, s, d)
+            if eq is None:
+                eq = solver.solve(s * d, x0=prev.x, wrench0=prev.wrench[task])
+                if spent:
+                    eq = replace(eq, iterations=eq.iterations + spent)
+        p, prev_stiffness = _point_and_stiffness(vm, eq, s, d, kin)
         if points:
             a = points[-1]
             if a.stable and (not p.stable or _is_drop(a.stiffness, p.stiffness)):
