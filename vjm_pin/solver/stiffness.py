@@ -51,24 +51,29 @@ class StiffnessResult:
 
 
 def _equilibrate(a: np.ndarray, sweeps: int = 4) -> np.ndarray:
+    """Symmetric Ruiz scaling ``D A D`` (rows and columns to unit max-norm): VJM matrices
+    mix axial link stiffness (~1e9) with Jacobian entries (~1), so conditioning must be
+    judged on the scaled matrix."""
     return _ruiz(a, sweeps)[0]
 
 
 def _ruiz(a: np.ndarray, sweeps: int = 4) -> tuple[np.ndarray, np.ndarray]:
-    """Symmetric Ruiz scaling ``D A D`` (rows and columns to unit max-norm): VJM matrices
-    mix axial link stiffness (~1e9) with Jacobian entries (~1), so conditioning must be
-    judged on the scaled matrix. The sweeps run on ``|A|`` (scaling by positive factors
-    commutes with the absolute value) and ``D`` is applied to ``A`` once at the end."""
-    s = np.abs(a)
+    """:func:`_equilibrate` and its diagonal ``d`` (``S = diag(d) A diag(d)``).
+
+    A sweep divides row and column ``i`` by the square root of the larger of their max-norms.
+    Since ``max(D|A|D, D|A|ᵀD) = D max(|A|, |A|ᵀ) D`` for a positive diagonal ``D``, the sweeps
+    run on the symmetric ``M = max(|A|, |A|ᵀ)`` (one row maximum each) and ``D`` is applied to
+    ``A`` once at the end (equal to the sweep-by-sweep scaling up to rounding)."""
+    aa = np.abs(a)
+    mm = np.maximum(aa, aa.T)
     d = np.ones(a.shape[0])
     for _ in range(sweeps):
-        r = np.sqrt(np.maximum(s, s.T).max(axis=1))  # max of row i and column i
+        r = mm.max(axis=1)
         r[r == 0] = 1.0
-        r = 1.0 / r
-        s *= r[:, None]
-        s *= r
+        r = 1.0 / np.sqrt(r)
+        mm *= np.multiply.outer(r, r)
         d *= r
-    return a * d[:, None] * d, d
+    return a * np.multiply.outer(d, d), d
 
 
 def _rcond(a: np.ndarray) -> float:
