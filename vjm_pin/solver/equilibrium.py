@@ -293,7 +293,7 @@ class EquilibriumSolver:
             qf, _, info2 = _lapack.dorgqr(qfull, tq)
             rr = qr[:m] * self._triu
             _, sv, _, info3 = _lapack.dgesdd(rr, compute_uv=0)
-            if info or info2 or info3 or not sv.min() > RANK_TOL * sv.max():
+            if info or info2 or info3 or not sv[-1] > RANK_TOL * sv[0]:  # descending
                 return None
             y, z = qf[:, :m], qf[:, m:]
             f, info = _lapack.dtrtrs(rr, y.T @ tau)  # least-squares multiplier
@@ -301,8 +301,11 @@ class EquilibriumSolver:
                 return None
             r = tau - jac.T @ f
             ae = np.abs(e)
-            ep = ae[ip].max() if ip.size else 0.0
-            er = ae[ir].max() if rot else 0.0
+            if rot:
+                ep = ae[ip].max() if ip.size else 0.0
+                er = ae[ir].max()
+            else:
+                ep, er = ae.max(), 0.0
             rs = np.abs(r).max()
             es = e / escale
             kkt = math.sqrt(es @ es) + math.sqrt(r @ r) / kscale
@@ -333,10 +336,10 @@ class EquilibriumSolver:
                 return None
             w = kz - hz
             red = z.T @ w @ z
-            if self.follow_stable:
-                sym = 0.5 * (red + red.T)
-                sym.flat[diag] -= shift
-                if _lapack.dpotrf(sym)[1]:
+            if self.follow_stable:  # ½(red + redᵀ) − shift·I ≻ 0
+                sym = red + red.T
+                sym.flat[diag] -= 2.0 * shift
+                if _lapack.dpotrf(sym, overwrite_a=1)[1]:
                     return None  # not positive definite: the safeguarded path shifts it
             py, info = _lapack.dtrtrs(rr, e, trans=1)  # Rᵀ p_Y = e
             dy = y @ py
