@@ -231,7 +231,7 @@ def _max_eig(eq: EquilibriumResult) -> float:
 
 
 def _refine_eigen(
-    vm, d, a: CurvePoint, b: CurvePoint, index: int, kin, refine_tol: float, tol: float
+    vm, d, a: CurvePoint, b: CurvePoint, index: int, kin, refine_tol: float, solver: EquilibriumSolver
 ):
     """Bifurcation from the pre-critical branch: continue that branch past it (Newton
     without the stability safeguard, warm start from ``a``) and find where the largest
@@ -240,7 +240,8 @@ def _refine_eigen(
     unstable equilibrium (e.g. a fold): the caller then bisects."""
     if not np.isfinite(a.stiffness):
         return None
-    unstable = EquilibriumSolver(vm, follow_stable=False, tol=tol, restarts=0)
+    # (the caller's Kinematics is shared: a new pin.Data costs seconds for subdivided models)
+    unstable = solver._sibling(follow_stable=False, tol=solver.tol, restarts=0)
     task = list(vm.task)
     # continuation in sub-steps, each checked against the tangent predictor, keeps to the
     # branch connected to ``a``; stop at the first sub-step where eq. (23) fails
@@ -354,7 +355,7 @@ def _refine(
     refine_tol: float,
     before: CurvePoint | None = None,
 ) -> CriticalPoint:
-    found = _refine_eigen(vm, d, a, b, index, kin, refine_tol, solver.tol)
+    found = _refine_eigen(vm, d, a, b, index, kin, refine_tol, solver)
     if found is not None:
         return found
     if b.stable:
@@ -433,14 +434,14 @@ def _distinct(eq: EquilibriumResult, others, tol=1e-6) -> bool:
     return all(np.linalg.norm(eq.x - o.x) > tol * max(1.0, np.linalg.norm(o.x)) for o in others)
 
 
-def _other_branches(vm, d, points, critical, s_grid, kin) -> tuple[tuple[CurvePoint, ...], ...]:
+def _other_branches(vm, d, points, critical, s_grid, kin, solver) -> tuple[tuple[CurvePoint, ...], ...]:
     """Branches that leave the critical points: seeds at the first step after each
     critical point, from the pre-critical state itself (the trivial branch continued) and
     from it displaced along ± each eigenvector of the reduced matrix of eq. (23), solved
     with ``follow_stable=False`` and continued by warm starts."""
     from . import blocks_at
 
-    unstable = EquilibriumSolver(vm, follow_stable=False)
+    unstable = solver._sibling(follow_stable=False)  # shares the Kinematics (pin.Data)
     branches = []
     seen = [p.equilibrium for p in points]
     for c in critical:
@@ -449,7 +450,7 @@ def _other_branches(vm, d, points, critical, s_grid, kin) -> tuple[tuple[CurvePo
         rest = [s for s in s_grid if s > points[i0].deflection]
         if not rest:
             continue
-        b = blocks_at(vm, base.x, base.wrench)
+        b = blocks_at(vm, base.x, base.wrench, kin)
         z = null_space(b.J_theta, b.J_q)
         free = np.concatenate([vm.theta_idx, vm.q_idx]).astype(int)
         amp = np.sqrt(abs(rest[0] - points[i0].deflection))
@@ -576,5 +577,5 @@ def trace_curve(
         prev = eq
         if progress is not None:
             progress(i + 1, steps + 1)
-    branches = _other_branches(vm, d, points, critical, s_grid, kin) if all_branches else ()
+    branches = _other_branches(vm, d, points, critical, s_grid, kin, solver) if all_branches else ()
     return Curve(direction=d, points=tuple(points), critical=tuple(critical), branches=branches)

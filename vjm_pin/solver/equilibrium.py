@@ -38,6 +38,8 @@ stalls or converges to an unstable equilibrium. The result says which path was u
 
 from __future__ import annotations
 
+import copy
+import inspect
 import math
 from dataclasses import dataclass, field, replace
 
@@ -198,6 +200,22 @@ class EquilibriumSolver:
         self._triu = np.triu(np.ones((len(self.task),) * 2))
         self._fast_max_iter = 8
         self._fast_cache: tuple[bytes, dict, StabilityResult | None] | None = None
+
+    def _sibling(self, **options) -> EquilibriumSolver:
+        """A solver of the same model with the given options (the defaults of ``__init__``
+        for the others) that shares this one's :class:`Kinematics`: creating a ``pin.Data``
+        costs seconds for finely subdivided models. Use in the same thread only."""
+        params = inspect.signature(EquilibriumSolver.__init__).parameters
+        opts = {k: p.default for k, p in params.items() if k not in ("self", "vm")}
+        opts.update(options)
+        if opts["method"] not in METHODS:
+            raise ValueError(f"unknown method '{opts['method']}'; choose one of {METHODS}")
+        new = copy.copy(self)
+        for k, v in opts.items():
+            setattr(new, k, v)
+        new.max_step = 0.3
+        new._fast_cache = None
+        return new
 
     # ----------------------------------------------------------------- helpers
     def energy(self, x: np.ndarray) -> float:
