@@ -52,7 +52,7 @@ from ..kinematics import Kinematics, contract_hessian, deflection, displace, pos
 from ..model import VjmModel
 from .blocks import Blocks, evaluate_blocks, full_wrench, remember_blocks
 from .stability import RANK_TOL, STABILITY_TOL, StabilityResult, check_stability, null_space, spectral_norm
-from .stiffness import stiffness_from_blocks
+from .stiffness import SCIPY_LAPACK_MAX_N, stiffness_from_blocks
 
 METHODS = ("newton", "fixed-point")
 
@@ -291,7 +291,9 @@ class EquilibriumSolver:
         f6 = np.zeros(6)
         tau = np.zeros(n)
         qfull = np.zeros((n, n), order="F")
-        # LAPACK directly: numpy.linalg's wrappers cost more than these small factorisations
+        # LAPACK directly for small models: numpy.linalg's wrappers cost more than these small
+        # factorisations; numpy.linalg for large ones (see SCIPY_LAPACK_MAX_N)
+        big = n > SCIPY_LAPACK_MAX_N
         for it in range(self._fast_max_iter + 1):
             st = kin.evaluate(x)
             if st.hessian is None:
@@ -306,10 +308,14 @@ class EquilibriumSolver:
                 e = (pt - st.position)[task]
             tau[:nt] = kt @ (x[ti] - th0)  # ∇E: K_θ(θ − θ₀), 0 for q
             # complete QR of Jᵀ (n × m): Q = [Y Z], R = upper triangle of qr[:m]
-            qr, tq, _, info = _lapack.dgeqrf(jac.T)
-            qfull[:, :m] = qr
-            qf, _, info2 = _lapack.dorgqr(qfull, tq)
-            rr = qr[:m] * self._triu
+            if big:
+                qf, rf = np.linalg.qr(jac.T, mode="complete")
+                rr, info, info2 = rf[:m], 0, 0
+            else:
+                qr, tq, _, info = _lapack.dgeqrf(jac.T)
+                qfull[:, :m] = qr
+                qf, _, info2 = _lapack.dorgqr(qfull, tq)
+                rr = qr[:m] * self._triu
             _, sv, _, info3 = _lapack.dgesdd(rr, compute_uv=0)
             if info or info2 or info3 or not sv[-1] > RANK_TOL * sv[0]:  # descending
                 return None
@@ -335,9 +341,12 @@ class EquilibriumSolver:
                 res = {"position": float(ep), "orientation": float(er), "statics": float(rs)}
                 # eq. (23) in the basis Z (its eigenvalues do not depend on the basis)
                 red = z.T @ (hz - kz) @ z
-                ev, _, info = _lapack.dsyevd(0.5 * (red + red.T), compute_v=0)
-                if info:
-                    return None
+                if big:
+                    ev = np.linalg.eigvalsh(0.5 * (red + red.T))
+                else:
+                    ev, _, info = _lapack.dsyevd(0.5 * (red + red.T), compute_v=0)
+                    if info:
+                        return None
                 thr = STABILITY_TOL * (spectral_norm(kt) if kt.size else 1.0)
                 stab = StabilityResult(bool(ev.size == 0 or ev.max() < -thr), ev, n - m, float(thr))
                 if self.follow_stable and not stab.stable:
@@ -357,11 +366,22 @@ class EquilibriumSolver:
             if self.follow_stable:  # ½(red + redᵀ) − shift·I ≻ 0
                 sym = red + red.T
                 sym.flat[diag] -= 2.0 * shift
-                if _lapack.dpotrf(sym, overwrite_a=1)[1]:
+                if big:
+                    try:
+                        np.linalg.cholesky(sym)
+                    except np.linalg.LinAlgError:
+                        return None
+                elif _lapack.dpotrf(sym, overwrite_a=1)[1]:
                     return None  # not positive definite: the safeguarded path shifts it
             py, info = _lapack.dtrtrs(rr, e, trans=1)  # Rᵀ p_Y = e
             dy = y @ py
-            _, _, pz, info2 = _lapack.dgesv(red, z.T @ (r + w @ dy), overwrite_b=1)
+            if big:
+                try:
+                    pz, info2 = np.linalg.solve(red, z.T @ (r + w @ dy)), 0
+                except np.linalg.LinAlgError:
+                    return None
+            else:
+                _, _, pz, info2 = _lapack.dgesv(red, z.T @ (r + w @ dy), overwrite_b=1)
             if info or info2:
                 return None
             dx = dy - z @ pz

@@ -12,6 +12,12 @@ from .blocks import Blocks
 from .stability import RANK_TOL
 
 METHODS = ("eq30", "eq32", "eq33")
+#: Largest matrix order for which the hot paths call scipy's LAPACK directly (numpy.linalg's
+#: wrappers cost more than small factorisations). numpy and scipy load two different OpenBLAS
+#: libraries, each with its own thread pool; above the size where OpenBLAS starts threads,
+#: alternating between them lets one pool's spinning threads slow the other down (10x on a
+#: 2-core machine at n = 146), so larger matrices go through numpy.linalg (one pool).
+SCIPY_LAPACK_MAX_N = 48
 #: Reciprocal condition number below which a matrix to invert is treated as singular.
 SINGULAR_RCOND = 1e-13
 
@@ -97,11 +103,19 @@ def _inverse_if_regular(a: np.ndarray):
     if n == 0:
         return None, False
     s, d = _ruiz(a)
-    lu, piv, info = _lapack.dgetrf(s)
-    if info:
-        return None, False
-    inv, info = _lapack.dgetri(lu, piv)
-    if info or not np.isfinite(inv).all():
+    if n > SCIPY_LAPACK_MAX_N:  # one OpenBLAS thread pool (see SCIPY_LAPACK_MAX_N)
+        try:
+            inv = np.linalg.inv(s)
+        except np.linalg.LinAlgError:
+            return None, False
+    else:
+        lu, piv, info = _lapack.dgetrf(s)
+        if info:
+            return None, False
+        inv, info = _lapack.dgetri(lu, piv)
+        if info:
+            return None, False
+    if not np.isfinite(inv).all():
         return None, False
     sa, ia = np.abs(s), np.abs(inv)
     norm_s = np.sqrt(sa.sum(axis=0).max() * sa.sum(axis=1).max())
