@@ -6,7 +6,9 @@ equilibrium of eq. (5) is solved by continuation from the previous one
 (:class:`~vjm_pin.solver.EquilibriumSolver` warm start; its perturbed restarts leave an
 equilibrium that has become unstable, so the *stable* branch is followed), its stability
 is checked (eq. 23) and the tangent stiffness along ``d`` is ``dᵀ K_C d`` with ``K_C`` of
-eq. (30).
+eq. (30). From a stable point the next one is first tried from the tangent predictor
+(eq. 29, ``δq = K_q δt``, ``δθ = K_θ δt``) with plain Newton steps only; when that does not
+give a stable equilibrium the point is solved from the previous equilibrium as above.
 
 Critical point rule (buckling)
 ------------------------------

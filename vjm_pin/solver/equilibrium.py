@@ -51,8 +51,16 @@ from ..exceptions import InputError, NoEquilibrium, SingularStiffness
 from ..kinematics import Kinematics, contract_hessian, deflection, displace, pose_error
 from ..model import VjmModel
 from .blocks import Blocks, evaluate_blocks, full_wrench, remember_blocks
-from .stability import RANK_TOL, STABILITY_TOL, StabilityResult, check_stability, null_space, spectral_norm
-from .stiffness import SCIPY_LAPACK_MAX_N, stiffness_from_blocks
+from .stability import (
+    RANK_TOL,
+    SCIPY_LAPACK_MAX_N,
+    STABILITY_TOL,
+    StabilityResult,
+    check_stability,
+    null_space,
+    spectral_norm,
+)
+from .stiffness import stiffness_from_blocks
 
 METHODS = ("newton", "fixed-point")
 

@@ -5,8 +5,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import lapack as _lapack
 
 from .blocks import Blocks
+
+#: Largest matrix order for which the hot paths call scipy's LAPACK directly (numpy.linalg's
+#: wrappers cost more than small factorisations). numpy and scipy load two different OpenBLAS
+#: libraries, each with its own thread pool; above the size where OpenBLAS starts threads,
+#: alternating between them lets one pool's spinning threads slow the other down (10x on a
+#: 2-core machine at n = 146), so larger matrices go through numpy.linalg (one pool).
+SCIPY_LAPACK_MAX_N = 48
 
 #: Relative tolerance on the eigenvalues of the reduced matrix of eq. (23): the
 #: equilibrium is stable when every eigenvalue is below ``-STABILITY_TOL · ‖K_θ‖₂``.
@@ -64,8 +72,18 @@ def _null_space_fast(J_theta: np.ndarray, J_q: np.ndarray, rank_tol: float = RAN
     m, n = a.shape
     if m == 0 or m >= n:
         return null_space(J_theta, J_q, rank_tol)
-    q, r = np.linalg.qr(a.T, mode="complete")
-    s = np.linalg.svd(r[:m], compute_uv=False)
+    if n <= SCIPY_LAPACK_MAX_N:  # LAPACK directly (numpy's wrapper costs more at this size)
+        qr, tau, _, info = _lapack.dgeqrf(a.T)
+        qfull = np.zeros((n, n), order="F")
+        qfull[:, :m] = qr
+        q, _, info2 = _lapack.dorgqr(qfull, tau)
+        r = np.triu(qr[:m])
+        if info or info2:
+            return null_space(J_theta, J_q, rank_tol)
+    else:
+        q, r = np.linalg.qr(a.T, mode="complete")
+        r = r[:m]
+    s = np.linalg.svd(r, compute_uv=False)
     if not s.min() > rank_tol * max(s.max(), 1e-300):
         return null_space(J_theta, J_q, rank_tol)
     return q[:, m:]

@@ -9,15 +9,9 @@ from scipy.linalg import lapack as _lapack
 
 from ..exceptions import SingularStiffness
 from .blocks import Blocks
-from .stability import RANK_TOL
+from .stability import RANK_TOL, SCIPY_LAPACK_MAX_N
 
 METHODS = ("eq30", "eq32", "eq33")
-#: Largest matrix order for which the hot paths call scipy's LAPACK directly (numpy.linalg's
-#: wrappers cost more than small factorisations). numpy and scipy load two different OpenBLAS
-#: libraries, each with its own thread pool; above the size where OpenBLAS starts threads,
-#: alternating between them lets one pool's spinning threads slow the other down (10x on a
-#: 2-core machine at n = 146), so larger matrices go through numpy.linalg (one pool).
-SCIPY_LAPACK_MAX_N = 48
 #: Reciprocal condition number below which a matrix to invert is treated as singular.
 SINGULAR_RCOND = 1e-13
 
