@@ -164,6 +164,11 @@ class FDKinematics(Kinematics):
 
     def evaluate(self, x: np.ndarray, hessian: bool = True) -> KinematicState:
         x = np.asarray(x, float)
+        # the same reuse of the last evaluation as Kinematics.evaluate (same algorithm)
+        key = x.tobytes()
+        last = self._last
+        if last is not None and last[0] == key and (last[1].hessian is not None or not hessian):
+            return last[1]
         jac = self._jacobian(x, self.h)
         hes = None
         if hessian:
@@ -177,7 +182,9 @@ class FDKinematics(Kinematics):
                 xm[j] -= hh
                 hes[:, :, j] = (self._jacobian(xp, self.h_inner) - self._jacobian(xm, self.h_inner)) / (2 * hh)
         p, r = self.placement(x)
-        return KinematicState(p, r, jac, hes)
+        state = KinematicState(p, r, jac, hes)
+        self._last = (key, state)
+        return state
 
 
 def fd_solver(vm: VjmModel, **kwargs) -> EquilibriumSolver:
