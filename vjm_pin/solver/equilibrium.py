@@ -393,8 +393,8 @@ class EquilibriumSolver:
             if info or info2:
                 return None
             dx = dy - z @ pz
-            big = np.abs(dx / self.var_scale).max()
-            if not big <= self.max_step:  # also catches NaN
+            smax = np.abs(dx / self.var_scale).max()
+            if not smax <= self.max_step:  # also catches NaN
                 return None
             x = x.copy()
             x[free] += dx
