@@ -206,6 +206,9 @@ class EquilibriumSolver:
         self._ip = np.array(self._rows_p, int)
         self._ir = np.array(self._rows_r, int)
         self._triu = np.triu(np.ones((len(self.task),) * 2))
+        t = self.task
+        contiguous = bool(t) and t == list(range(t[0], t[-1] + 1))
+        self._task_rows = slice(t[0], t[-1] + 1) if contiguous else np.array(t, int)
         self._fast_max_iter = 8
         self._fast_cache: tuple[bytes, dict, StabilityResult | None] | None = None
 
@@ -291,7 +294,7 @@ class EquilibriumSolver:
         diag = np.arange(n - m) * (n - m + 1)
         ip, ir, escale = self._ip, self._ir, self._err_scale
         rot = ir.size > 0  # log3 only when orientation rows are constrained
-        rows = None if self._all_task else task
+        rows = None if self._all_task else self._task_rows
         pt = np.asarray(p_t, float)
         rt = np.asarray(r_t, float)
         kkt_prev = np.inf
@@ -313,8 +316,8 @@ class EquilibriumSolver:
                 if rows is not None:
                     e = e[rows]
             else:
-                e = (pt - st.position)[task]
-            tau[:nt] = kt @ (x[ti] - th0)  # ∇E: K_θ(θ − θ₀), 0 for q
+                e = (pt - st.position)[rows]
+            tau[:nt] = kt @ (x.take(ti) - th0)  # ∇E: K_θ(θ − θ₀), 0 for q
             # complete QR of Jᵀ (n × m): Q = [Y Z], R = upper triangle of qr[:m]
             if big:
                 qf, rf = np.linalg.qr(jac.T, mode="complete")
@@ -323,10 +326,11 @@ class EquilibriumSolver:
                 qr, tq, _, info = _lapack.dgeqrf(jac.T)
                 qfull[:, :m] = qr
                 qf, _, info2 = _lapack.dorgqr(qfull, tq)
-                rr = qr[:m] * self._triu
-            _, sv, _, info3 = _lapack.dgesdd(rr, compute_uv=0)
-            if info or info2 or info3 or not sv[-1] > RANK_TOL * sv[0]:  # descending
+                rr = qr[:m]  # R is its upper triangle (dtrtrs reads only that)
+            if info or info2:
                 return None
+            # the rank test (RANK_TOL, as null_space) is made where the result is used: at
+            # convergence; before it a rank-deficient J gives a non-finite or clipped step
             y, z = qf[:, :m], qf[:, m:]
             f, info = _lapack.dtrtrs(rr, y.T @ tau)  # least-squares multiplier
             if info:
@@ -341,11 +345,14 @@ class EquilibriumSolver:
             rs = np.abs(r).max()
             es = e / escale
             kkt = math.sqrt(es @ es) + math.sqrt(r @ r) / kscale
-            f6[task] = f
+            f6[self._task_rows] = f
             hz = contract_hessian(st.hessian, f6).take(self._hidx).reshape(n, n)
             # the test of _residuals, with the end placed as accurately as the safeguarded
             # path's restoration places it (0.01·tol): wrench-driven loops (eq. 11) rely on it
             if ep <= 0.01 * tol_p and er <= 0.01 * tol and rs <= tol * max(np.abs(tau).max(), stat_floor):
+                _, sv, _, info = _lapack.dgesdd(rr * self._triu, compute_uv=0)
+                if info or not sv[-1] > RANK_TOL * sv[0]:  # descending
+                    return None
                 res = {"position": float(ep), "orientation": float(er), "statics": float(rs)}
                 # eq. (23) in the basis Z (its eigenvalues do not depend on the basis)
                 red = z.T @ (hz - kz) @ z
