@@ -211,6 +211,7 @@ class EquilibriumSolver:
         self._task_rows = slice(t[0], t[-1] + 1) if contiguous else np.array(t, int)
         self._fast_max_iter = 8
         self._fast_cache: tuple[bytes, dict, StabilityResult | None] | None = None
+        self._fast_fact: tuple | None = None  # factorisation at the last fast-path equilibrium
 
     def _sibling(self, **options) -> EquilibriumSolver:
         """A solver of the same model with the given options (the defaults of ``__init__``
@@ -226,6 +227,7 @@ class EquilibriumSolver:
             setattr(new, k, v)
         new.max_step = 0.3
         new._fast_cache = None
+        new._fast_fact = None
         return new
 
     # ----------------------------------------------------------------- helpers
@@ -306,36 +308,48 @@ class EquilibriumSolver:
         # factorisations; numpy.linalg for large ones (see SCIPY_LAPACK_MAX_N)
         big = n > SCIPY_LAPACK_MAX_N
         for it in range(self._fast_max_iter + 1):
-            st = kin.evaluate(x)
-            if st.hessian is None:
-                return None
-            jac = st.jacobian if rows is None else st.jacobian[rows]
-            jac = jac.take(free, axis=1)
+            key = x.tobytes()
+            fact = self._fast_fact
+            if fact is not None and fact[0] == key and fact[1] is self.kin:
+                # a warm start from the equilibrium this solver just found: its J, QR,
+                # multiplier and Hessian depend on x only (the target does not enter them)
+                st, jac, qf, rr, f, r, tau, hz = fact[2:]
+                y, z = qf[:, :m], qf[:, m:]
+                f6[self._task_rows] = f
+            else:
+                st = kin.evaluate(x)
+                if st.hessian is None:
+                    return None
+                jac = st.jacobian if rows is None else st.jacobian[rows]
+                jac = jac.take(free, axis=1)
+                tau = np.zeros(n)
+                tau[:nt] = kt @ (x.take(ti) - th0)  # ∇E: K_θ(θ − θ₀), 0 for q
+                # complete QR of Jᵀ (n × m): Q = [Y Z], R = upper triangle of qr[:m]
+                if big:
+                    qf, rf = np.linalg.qr(jac.T, mode="complete")
+                    rr, info, info2 = rf[:m], 0, 0
+                else:
+                    qr, tq, _, info = _lapack.dgeqrf(jac.T)
+                    qfull[:, :m] = qr
+                    qf, _, info2 = _lapack.dorgqr(qfull, tq)
+                    rr = qr[:m]  # R is its upper triangle (dtrtrs reads only that)
+                if info or info2:
+                    return None
+                # the rank test (RANK_TOL, as null_space) is made where the result is used: at
+                # convergence; before it a rank-deficient J gives a non-finite or clipped step
+                y, z = qf[:, :m], qf[:, m:]
+                f, info = _lapack.dtrtrs(rr, y.T @ tau)  # least-squares multiplier
+                if info:
+                    return None
+                r = tau - jac.T @ f
+                f6[self._task_rows] = f
+                hz = contract_hessian(st.hessian, f6).take(self._hidx).reshape(n, n)
             if rot:
                 e = np.concatenate([pt - st.position, pin.log3(rt @ st.rotation.T)])
                 if rows is not None:
                     e = e[rows]
             else:
                 e = (pt - st.position)[rows]
-            tau[:nt] = kt @ (x.take(ti) - th0)  # ∇E: K_θ(θ − θ₀), 0 for q
-            # complete QR of Jᵀ (n × m): Q = [Y Z], R = upper triangle of qr[:m]
-            if big:
-                qf, rf = np.linalg.qr(jac.T, mode="complete")
-                rr, info, info2 = rf[:m], 0, 0
-            else:
-                qr, tq, _, info = _lapack.dgeqrf(jac.T)
-                qfull[:, :m] = qr
-                qf, _, info2 = _lapack.dorgqr(qfull, tq)
-                rr = qr[:m]  # R is its upper triangle (dtrtrs reads only that)
-            if info or info2:
-                return None
-            # the rank test (RANK_TOL, as null_space) is made where the result is used: at
-            # convergence; before it a rank-deficient J gives a non-finite or clipped step
-            y, z = qf[:, :m], qf[:, m:]
-            f, info = _lapack.dtrtrs(rr, y.T @ tau)  # least-squares multiplier
-            if info:
-                return None
-            r = tau - jac.T @ f
             ae = np.abs(e)
             if rot:
                 ep = ae[ip].max() if ip.size else 0.0
@@ -345,8 +359,6 @@ class EquilibriumSolver:
             rs = np.abs(r).max()
             es = e / escale
             kkt = math.sqrt(es @ es) + math.sqrt(r @ r) / kscale
-            f6[self._task_rows] = f
-            hz = contract_hessian(st.hessian, f6).take(self._hidx).reshape(n, n)
             # the test of _residuals, with the end placed as accurately as the safeguarded
             # path's restoration places it (0.01·tol): wrench-driven loops (eq. 11) rely on it
             if ep <= 0.01 * tol_p and er <= 0.01 * tol and rs <= tol * max(np.abs(tau).max(), stat_floor):
@@ -367,7 +379,8 @@ class EquilibriumSolver:
                 if self.follow_stable and not stab.stable:
                     self._fast_its = it
                     return None
-                self._fast_cache = (x.tobytes() + f6.tobytes() + pt.tobytes() + rt.tobytes(), res, stab)
+                self._fast_cache = (key + f6.tobytes() + pt.tobytes() + rt.tobytes(), res, stab)
+                self._fast_fact = (key, kin, st, jac, qf, rr, f, r, tau, hz)
                 # the Blocks at this equilibrium, as evaluate_blocks would build them (the
                 # stiffness of a curve point is evaluated here next)
                 blocks = Blocks(jac[:, :nt], jac[:, nt:], hz[:nt, :nt], hz[:nt, nt:], hz[nt:, :nt], hz[nt:, nt:], kt, st)
