@@ -113,7 +113,7 @@ def test_unloaded_with_passive_joints_matches_table1(seed):
 
 
 # --------------------------------------------------------------------------- loaded consistency
-def _fd_check(vm, solver, res, rng, n_dirs=3, h=1e-6):
+def check_fd_consistency(vm, solver, res, rng, n_dirs=3, h=1e-6):
     kc = loaded_stiffness(vm, res).stiffness
     task = list(vm.task)
     for _ in range(n_dirs):
@@ -136,7 +136,7 @@ def test_loaded_stiffness_matches_resolved_equilibria(seed):
     """K_C δt ≈ F(t + δt) − F(t) from re-solved equilibria, with forces and moments (dead load)."""
     vm = random_vjm(40 + seed, n_joints=5, n_passive=seed % 3, link_springs=2)
     solver, res = loaded_equilibrium(vm, seed, size=0.05)
-    _fd_check(vm, solver, res, np.random.default_rng(seed))
+    check_fd_consistency(vm, solver, res, np.random.default_rng(seed))
 
 
 def test_loaded_stiffness_model_c_postbuckling_matches_resolved_equilibria():
@@ -146,7 +146,7 @@ def test_loaded_stiffness_model_c_postbuckling_matches_resolved_equilibria():
     res = solver.solve([-1e-3, 0, 0])
     assert res.converged and res.stable
     assert abs(res.x[vm.joint_index("base_y")]) > 1e-3  # buckled out of plane
-    _fd_check(vm, solver, res, np.random.default_rng(7))
+    check_fd_consistency(vm, solver, res, np.random.default_rng(7))
 
 
 # --------------------------------------------------------------------------- stability
