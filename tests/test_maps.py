@@ -152,3 +152,11 @@ def test_cli_map(tmp_path, capsys):
         == 2
     )
     assert main(["map", "ur5", "--grid", "elbow_joint=0:1"]) == 2
+
+
+def test_map_of_a_model_without_motors_says_what_to_do(capsys):
+    from vjm_pin.cli import main
+
+    assert main(["map", "paper-c-s", "--samples", "3"]) == 2
+    err = capsys.readouterr().err
+    assert "no actuated joint" in err and "--grid" in err and len(err.strip().splitlines()) == 1

@@ -70,6 +70,11 @@ def sample_poses(vm: VjmModel, n: int, seed: int = 0, names=None) -> tuple[list[
     if int(n) < 1:
         raise InputError(f"--samples must be a positive integer, got {n}")
     names = list(names or mapped_joints(vm))
+    if not names:
+        raise InputError(
+            f"model '{vm.name}' has no actuated joint with an actuator spring to sample; "
+            "give the joints to vary with --grid NAME=LO:HI:N"
+        )
     lim = joint_limits(vm, names)
     rng = np.random.default_rng(seed)
     return names, lim[:, 0] + rng.random((int(n), len(names))) * (lim[:, 1] - lim[:, 0])
