@@ -130,6 +130,13 @@ def _as_target(vm, kin, p0, r0, deflection_=None, target=None):
             raise InputError(f"deflection must have 3 or 6 components (m, rad), got {d.size}")
         if not np.all(np.isfinite(d)):
             raise InputError(f"deflection contains NaN or infinite values: {d.tolist()}")
+        free = [i for i in range(6) if i not in vm.task and d[i] != 0.0]
+        if free:
+            names = ["x", "y", "z", "rx", "ry", "rz"]
+            raise InputError(
+                f"deflection components {[names[i] for i in free]} are not constrained by this model "
+                f"(task is {vm.task_names}): they cannot be prescribed"
+            )
         return displace(p0, r0, d)
     p, r = target
     p = np.asarray(p, float)
