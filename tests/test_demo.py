@@ -178,3 +178,11 @@ def test_browser_model_c_buckling_page(model_c, c_curve, tmp_path):
     assert height1 > 3 * height0 and height1 > height0 + 40, (height0, height1)
     diff = np.abs(img[before].astype(int) - img[last].astype(int)).max(axis=2)
     assert (diff > 30).mean() > 0.01
+
+
+def test_view_takes_the_robot_options(tmp_path, capsys):
+    """view accepts --q/--frame like analyze: a posed ur5 page is written."""
+    out = tmp_path / "ur5.html"
+    assert main(["view", "ur5", "--q", "elbow_joint=1.2", "--wrench", "0", "0", "-100", "--html", str(out)]) == 0
+    assert out.is_file() and "stable" in capsys.readouterr().out
+    assert main(["view", "ur5", "--frame", "nope", "--wrench", "0", "0", "-1", "--html", str(out)]) == 2

@@ -31,9 +31,9 @@ def add_parser(sub):
             "and serves until Ctrl-C."
         ),
     )
-    p.add_argument(
-        "model", metavar="MODEL", help="VJM URDF path or bundled model name (see 'vjm-pin models')"
-    )
+    from .analyze import add_robot_options
+
+    add_robot_options(p)  # MODEL, --q, --pose-name, --frame, --springs (as analyze)
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument(
         "--deflection", nargs="+", type=float, metavar="D", help="DX DY DZ [RX RY RZ] (m, rad)"
@@ -212,11 +212,12 @@ def load_frames(vm, res, scale: float | None = None, n: int = 11):
 # ----------------------------------------------------------------------------- command
 def run(args) -> int:
     from ..exceptions import InputError
-    from ..registry import resolve_model
     from ..solver import EquilibriumSolver
     from .common import finite_vector
 
-    vm = resolve_model(args.model)
+    from .analyze import load_from_args
+
+    vm, _ = load_from_args(args)
     if args.scale is not None and not (np.isfinite(args.scale) and args.scale > 0):
         raise InputError(f"--scale must be a positive number, got {args.scale}")
     if args.curve:
