@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import importlib.util
 import re
-import subprocess
 
 import numpy as np
 import pytest
@@ -18,7 +17,7 @@ from vjm_pin.solver import EquilibriumSolver
 from vjm_pin.solver.curve import trace_curve
 from vjm_pin.viewer import default_scale, magnify
 
-from .browser import chromium, start_screenshot
+from .browser import chromium, screenshot_frames
 
 MODEL = "paper-c-s"
 DIRECTION = np.array([-1.0, 0, 0, 0, 0, 0])
@@ -146,27 +145,12 @@ def test_browser_model_c_buckling_page(model_c, c_curve, tmp_path):
     browser = chromium()
     if browser is None:
         pytest.skip("no chromium binary on PATH (apt-get install chromium)")
-    from PIL import Image
 
     page = tmp_path / "c.html"
     cp = curve_page(model_c, c_curve, path=page, camera_direction=(0.0, -1.0, 0.0))
     assert cp.critical_frame is not None and cp.critical_frame >= 1
     before, last = cp.critical_frame - 1, cp.frames - 1
-    shots = {k: tmp_path / f"frame{k}.png" for k in (before, last)}
-    procs = {
-        k: start_screenshot(browser, f"{page.as_uri()}#frame={k}", png, tmp_path / f"p{k}")
-        for k, png in shots.items()
-    }
-    for k, p in procs.items():
-        try:
-            _, err = p.communicate(timeout=120)
-        except subprocess.TimeoutExpired:
-            p.kill()
-            pytest.fail(f"chromium did not finish the screenshot of frame {k} in 120 s")
-        assert shots[k].is_file(), (
-            f"no screenshot of frame {k}: {err.decode(errors='replace')[-2000:]}"
-        )
-    img = {k: np.asarray(Image.open(png).convert("RGB")) for k, png in shots.items()}
+    img = screenshot_frames(browser, page, (before, last), tmp_path)
     for k, a in img.items():
         assert a.std() > 10, f"frame {k}: blank screenshot"
     g0, g1 = _green(img[before]), _green(img[last])

@@ -3,9 +3,6 @@ rendered in headless Chromium (skipped when no chromium binary is installed)."""
 
 from __future__ import annotations
 
-import subprocess
-import time
-
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -21,7 +18,7 @@ from vjm_pin.viewer import (
     magnify,
 )
 
-from .browser import chromium, start_screenshot
+from .browser import chromium, screenshot_frames
 
 # Three revolute joints, links of 0.4 m along x; j2 bends the chain out of the xy plane.
 CHAIN_URDF = """<robot name="chain3">
@@ -288,7 +285,6 @@ def test_browser_renders_animation(chain, tmp_path):
     browser = chromium()
     if browser is None:
         pytest.skip("no chromium binary on PATH (apt-get install chromium)")
-    from PIL import Image
 
     model, geom = chain
     frames, stable, forces = bending_motion(model)
@@ -307,24 +303,7 @@ def test_browser_renders_animation(chain, tmp_path):
         path=page,
     )
     # the page pauses its player at the frame given in the URL fragment
-    shots = {k: tmp_path / f"frame{k}.png" for k in (0, 15)}
-    t0 = time.time()
-    procs = {
-        k: start_screenshot(browser, f"{page.as_uri()}#frame={k}", png, tmp_path / f"profile{k}")
-        for k, png in shots.items()
-    }
-    for k, p in procs.items():
-        try:
-            _, err = p.communicate(timeout=120)
-        except subprocess.TimeoutExpired:
-            p.kill()
-            pytest.fail(f"chromium did not finish the screenshot of frame {k} in 120 s")
-        assert shots[k].is_file(), (
-            f"no screenshot of frame {k}: {err.decode(errors='replace')[-2000:]}"
-        )
-    assert time.time() - t0 < 120
-
-    img = {k: np.asarray(Image.open(png).convert("RGB")) for k, png in shots.items()}
+    img = screenshot_frames(browser, page, (0, 15), tmp_path)
     for k, a in img.items():
         assert a.shape == (600, 800, 3)
         assert a.std() > 10, f"frame {k}: blank screenshot"
