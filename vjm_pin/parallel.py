@@ -829,7 +829,7 @@ def _min_lam(at, s, start):
 def _refine_robot(at, rs, d, b, a: RobotCurvePoint, bpt: RobotCurvePoint, index, refine_tol):
     """Locate the critical point between ``a`` (stable) and ``bpt`` (see
     :func:`trace_robot_force_curve`)."""
-    from .solver.curve import MAX_BISECTIONS
+    from .solver.curve import MAX_BISECTIONS, illinois
 
     lo, flo = _min_lam(at, a.s, a.equilibrium)
     hi, fhi = None, None
@@ -839,25 +839,17 @@ def _refine_robot(at, rs, d, b, a: RobotCurvePoint, bpt: RobotCurvePoint, index,
         except NoEquilibrium:
             hi = None
     if hi is not None and flo > 0 and fhi < 0:
-        side = 0
-        for _ in range(MAX_BISECTIONS):
-            s = (lo.s * fhi - hi.s * flo) / (fhi - flo)
+        def evaluate(s, _lo, _hi):
             try:  # always from a's state: the continued branch, not a neighbour near the root
                 m, fm = _min_lam(at, s, a.equilibrium)
             except NoEquilibrium:
-                break
-            if fm > 0:
-                lo, flo = m, fm
-                if side == -1:
-                    fhi *= 0.5
-                side = -1
-            else:
-                hi, fhi = m, fm
-                if side == 1:
-                    flo *= 0.5
-                side = 1
-            if abs(hi.s - lo.s) <= refine_tol * abs(s):
-                break
+                return None
+            return m, -fm  # illinois wants f < 0 on the stable side
+
+        lo, flo, hi, fhi, _, _ = illinois(
+            evaluate, lo, -flo, hi, -fhi, lambda p: p.s,
+            lambda lo_, hi_, m, s: abs(hi_.s - lo_.s) <= refine_tol * abs(s), MAX_BISECTIONS,
+        )
         w = flo / (flo - fhi)
         s_c = lo.s + w * (hi.s - lo.s)
         # the force at the root: the pre-critical branch extrapolated from lo with a's tangent

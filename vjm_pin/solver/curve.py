@@ -232,6 +232,36 @@ def _max_eig(eq: EquilibriumResult) -> float:
     return float(ev.max()) if ev.size else -np.inf
 
 
+def illinois(evaluate, lo, flo, hi, fhi, coord, done, max_iter: int):
+    """Illinois regula falsi for the root of a scalar ``f`` with ``f(lo) < 0 ≤ f(hi)``.
+
+    ``evaluate(s, lo, hi)`` returns ``(state, f)`` at the coordinate ``s`` of the current
+    bracket (or None when it cannot be evaluated), ``coord(state)`` the coordinate of a state, ``done(lo, hi, m, s)`` whether
+    the bracket is tight enough. Returns ``(lo, flo, hi, fhi, iterations, ok)``; ``ok`` is
+    False when an evaluation failed (the bracket so far is returned)."""
+    side = 0
+    n = 0
+    for n in range(1, max_iter + 1):
+        s = (coord(lo) * fhi - coord(hi) * flo) / (fhi - flo)
+        res = evaluate(s, lo, hi)
+        if res is None:
+            return lo, flo, hi, fhi, n, False
+        m, fm = res
+        if fm < 0:
+            lo, flo = m, fm
+            if side == -1:
+                fhi *= 0.5
+            side = -1
+        else:
+            hi, fhi = m, fm
+            if side == 1:
+                flo *= 0.5
+            side = 1
+        if done(lo, hi, m, s):
+            break
+    return lo, flo, hi, fhi, n, True
+
+
 def _refine_eigen(
     vm, d, a: CurvePoint, b: CurvePoint, index: int, kin, refine_tol: float, solver: EquilibriumSolver
 ):
@@ -270,31 +300,20 @@ def _refine_eigen(
         return None
     flo, fhi = _max_eig(lo.equilibrium), _max_eig(pb.equilibrium)
     hi = pb
-    side = 0
-    n = 0
-    for n in range(1, MAX_BISECTIONS + 1):
-        s = (lo.deflection * fhi - hi.deflection * flo) / (fhi - flo)
-        try:
-            eq = unstable.solve(s * d, x0=lo.equilibrium.x, wrench0=lo.equilibrium.wrench[task])
+    def evaluate(s, lo_, _hi):
+        try:  # warm start from the stable end of the bracket, as it moves
+            eq = unstable.solve(s * d, x0=lo_.equilibrium.x, wrench0=lo_.equilibrium.wrench[task])
         except NoEquilibrium:
             return None
-        if not eq.converged:
-            return None
-        m = _point(vm, eq, s, d, kin)
-        fm = _max_eig(eq)
-        if fm < 0:
-            lo, flo = m, fm
-            if side == -1:
-                fhi *= 0.5
-            side = -1
-        else:
-            hi, fhi = m, fm
-            if side == 1:
-                flo *= 0.5
-            side = 1
-        k = max(abs(lo.stiffness), abs(hi.stiffness))
-        if abs(hi.deflection - lo.deflection) * k <= 0.5 * refine_tol * max(abs(m.force), 1e-300):
-            break
+        return (_point(vm, eq, s, d, kin), _max_eig(eq)) if eq.converged else None
+
+    def done(lo_, hi_, m, s):
+        k = max(abs(lo_.stiffness), abs(hi_.stiffness))
+        return abs(hi_.deflection - lo_.deflection) * k <= 0.5 * refine_tol * max(abs(m.force), 1e-300)
+
+    lo, flo, hi, fhi, n, ok = illinois(evaluate, lo, flo, hi, fhi, lambda p: p.deflection, done, MAX_BISECTIONS)
+    if not ok:
+        return None
     # the root by linear interpolation of the eigenvalue, force likewise
     w = flo / (flo - fhi) if fhi != flo else 0.5
     s_c = lo.deflection + w * (hi.deflection - lo.deflection)
