@@ -331,7 +331,9 @@ class RobotSolver:
             )
         return x0
 
-    def solve(self, deflection=None, *, target=None, x0=None) -> RobotEquilibrium:
+    def solve(
+        self, deflection=None, *, target=None, x0=None, fast_fail: bool = False
+    ) -> RobotEquilibrium:
         """Robot equilibrium for a prescribed platform location: every leg is solved at the
         same platform pose (eq. 5 per leg) and the leg wrenches are summed.
 
@@ -339,6 +341,8 @@ class RobotSolver:
             deflection: (6,) or (3,) platform displacement (m, world rotation vector rad), or
             target: (position (3,), rotation (3, 3)) of the platform.
             x0: warm start: a previous :class:`RobotEquilibrium` or one configuration per leg.
+            fast_fail: one Newton attempt per leg, no continuation or restarts (trial points
+                of a line search; see :meth:`EquilibriumSolver.solve`).
         Raises:
             NoEquilibrium: a leg has no equilibrium there (the message names the leg).
         """
@@ -357,7 +361,7 @@ class RobotSolver:
         legs = []
         for lg, s, g in zip(self.pm.legs, self.solvers, guesses):
             try:
-                r = s.solve(target=target, x0=g)
+                r = s.solve(target=target, x0=g, fast_fail=fast_fail)
             except NoEquilibrium as e:
                 raise NoEquilibrium(f"leg '{lg.name}': {e}", e.result, e.residual) from None
             legs.append(LegResult(lg.name, r))
@@ -653,13 +657,17 @@ def solve_free(
     s0 = float(d @ start.deflection)
     eq = rs.solve(target=displace(start.position, start.rotation, (s - s0) * d), x0=start)
 
-    def newton(eq):
+    def newton(eq, patience=None):
         fscale = max(float(np.linalg.norm(eq.wrench)), 1.0)
+        history = []
         for _ in range(max_iter):
             k, lam, v = _free_eigen(rs, eq, b)
             g = b.T @ eq.wrench
             if np.linalg.norm(g) <= tol * fscale:
                 return eq, k, lam, v
+            history.append(np.linalg.norm(g))
+            if patience and len(history) > patience and history[-1] > 0.5 * history[-1 - patience]:
+                break  # crawling (a flat saddle region): give up this start
             if leave_saddle:  # saddle-free Newton: descend the energy
                 mod = np.maximum(np.abs(lam), 1e-10 * np.abs(lam).max())
             else:  # plain Newton: continue the branch, stable or not
@@ -672,7 +680,9 @@ def solve_free(
             for _ in range(30):
                 try:
                     cand = rs.solve(
-                        target=displace(eq.position, eq.rotation, b @ (step * dy)), x0=eq
+                        target=displace(eq.position, eq.rotation, b @ (step * dy)),
+                        x0=eq,
+                        fast_fail=True,
                     )
                 except NoEquilibrium:
                     cand = None
@@ -701,8 +711,9 @@ def solve_free(
                     start2 = rs.solve(
                         target=displace(eq.position, eq.rotation, sign * amp * (b @ v[:, 0])),
                         x0=eq,
+                        fast_fail=True,
                     )
-                    e2, k2, lam2, v2 = newton(start2)
+                    e2, k2, lam2, v2 = newton(start2, patience=10)
                 except NoEquilibrium:
                     continue
                 ok = np.linalg.norm(b.T @ e2.wrench) <= 1e-6 * fscale and lam2.min() > 0

@@ -652,6 +652,7 @@ class EquilibriumSolver:
         x0: np.ndarray | None = None,
         wrench0: np.ndarray | None = None,
         raise_on_failure: bool = True,
+        fast_fail: bool = False,
     ) -> EquilibriumResult:
         """Equilibrium for a prescribed end location.
 
@@ -664,6 +665,9 @@ class EquilibriumSolver:
             wrench0: Starting wrench (6,) (N, N·m); default zero.
             raise_on_failure: Raise :class:`NoEquilibrium` (carrying the last iterate) when
                 no attempt converges; otherwise return it with ``converged=False``.
+            fast_fail: One Newton attempt from ``x0``, without continuation or perturbed
+                restarts: for trial points of a line search, where a failure only shortens
+                the step and the full recovery (up to thousands of iterations) is wasted.
         """
         vm = self.vm
         p_t, r_t = _as_target(vm, self.kin, self.p0, self.r0, deflection, target)
@@ -682,6 +686,8 @@ class EquilibriumSolver:
             nonlocal total
             x, f, it, ok, st = self._iterate(x_init, f_init, p_t, r_t, self.max_iter)
             total += it
+            if not ok and fast_fail:
+                return self._result(x, f, total, False, st, p_t, r_t, label, with_stability=False)
             if not ok:
                 # continuation from the attempt's start towards the target
                 ps, rs = self.kin.placement(x_init)
@@ -712,7 +718,7 @@ class EquilibriumSolver:
         if res.converged and (res.stable or not self.follow_stable):
             return res if res.iterations == total else replace(res, iterations=total)
         best = res
-        for k in range(1, self.restarts + 1):
+        for k in range(1, 0 if fast_fail else self.restarts + 1):
             xr = self._perturb(x_start if not res.converged else res.x, rng)
             r2 = attempt(xr, f_start if not res.converged else res.wrench[self.task], f"{name}+restart({k})")
             if r2.converged and (r2.stable or not self.follow_stable):
