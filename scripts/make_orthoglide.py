@@ -13,6 +13,12 @@ first passive revolute R1 at A_i = ρ_i e_i, a parallelogram (two bars, two axle
 revolute R2 to the platform. R1, R2 are along the axle y_i = e_{i+1} (cyclic choice, src §2.1);
 the parallelogram joints along n_i = e_i × y_i = e_{i+2}.
 
+Bars: the section is not published; it is **designed** so that a leg buckles (Euler, the
+parallelogram pinned by R1 and R2) at the leg force of Table 2's Q0 critical point
+(:func:`bar_outer_diameter`), and each bar is modelled by ``BAR_SEGMENTS`` VJM segments so that
+the chain between the pins can bow. With this, every work point buckles within the paper's
+range and the critical forces of Q1…Q4 are predictions (docs/orthoglide.md).
+
 Variants
 --------
 ``orthoglide-qK``  (folded, as the seed paper: "the limb stiffness is described by an equivalent
@@ -79,8 +85,42 @@ E_AL, G_AL = 70e9, 26e9
 #: Foot: cantilever bracket l_f = 100 mm, solid 40 × 20 mm (40 across, 20 along the actuator
 #: axis), along the parallelogram normal n_i (assumption, src §2.5 and §3.3; not published).
 FOOT = Beam(0.100, "rectangle", {"a": 0.020, "b": 0.040}, E_AL, G_AL)
-#: Bars: aluminium tubes Ø20 × 2 mm (assumption, src §3.3).
-BAR = Beam(L_BAR, "tube", {"outer_diameter": 0.020, "wall": 0.002}, E_AL, G_AL)
+#: Table 2's critical force at the isotropic point Q0 (N). At Q0 the three bars are along the
+#: actuator axes e_i, so a force F along the bisector u loads each leg with F/√3 (statics,
+#: docs/orthoglide.md "Critical forces"): the seed paper's Q0 buckling is a leg force of
+#: 4.65 kN/√3 = 2.685 kN.
+F_CR_TABLE2_Q0 = 4.65e3
+#: Wall thickness of the bar tubes relative to their outer diameter (assumption: the proportion
+#: of the Ø20 × 2 mm tube first assumed in src §3.3).
+BAR_WALL_RATIO = 0.1
+#: Number of VJM segments per bar (beyond the paper's single spring): each segment ends in the
+#: spring of a bar of length L/k, so the chain between the pins R1, R2 can bow and converges to
+#: the Euler column as k grows (1/k², docs/paper_reproduction.md, subdivision study).
+BAR_SEGMENTS = 8
+
+
+def bar_outer_diameter() -> float:
+    """Outer diameter (m) of the bar tubes, **derived** (not published, src §3.3): the
+    parallelogram is pinned at both ends by R1 and R2 (axes along the axle) and its two bars
+    bend together in the plane normal to the axle, so a leg buckles at Euler's load
+    π²·2EI/L² (pinned–pinned, two bars). Setting that equal to the leg force of Table 2's Q0
+    critical point, F_cr/√3 (statics at Q0), gives I = F_cr L²/(2√3 π² E); with wall = D/10,
+    I = (π/64)(1 − 0.8⁴) D⁴ → D ≈ 8.97 mm (Ø8.97 × 0.90 mm aluminium tubes). This is the
+    second calibration on Q0 (the first is k_a); every other point's critical force is then a
+    prediction."""
+    inertia = F_CR_TABLE2_Q0 / math.sqrt(3) * L_BAR**2 / (2 * math.pi**2 * E_AL)
+    shape = math.pi / 64 * (1 - (1 - 2 * BAR_WALL_RATIO) ** 4)
+    return (inertia / shape) ** 0.25
+
+
+def bar_beam(length: float = L_BAR) -> Beam:
+    """One bar (or one segment of it) as a :class:`~vjm_pin.beam.Beam` (aluminium tube)."""
+    d = bar_outer_diameter()
+    return Beam(length, "tube", {"outer_diameter": d, "wall": BAR_WALL_RATIO * d}, E_AL, G_AL)
+
+
+#: The whole bar (length L).
+BAR = bar_beam()
 #: Distance between the two bars along the axle (m): 80 mm (assumption, src §2.5).
 D_AXLE = 0.080
 #: Actuator stiffness (N/m), calibrated (src §3.3): at Q0 every bar is along its actuator, so the
@@ -92,8 +132,8 @@ K_TABLE2_Q0 = 3.23e6
 #: ρ_i by the constant r (src §2.2), and at Q0 every leg force still passes through P, so Q0's
 #: unloaded stiffness and the k_a calibration do not depend on it; under load it gives the leg
 #: forces a lever arm on the platform rotation (a compressed leg adds −P·r(1 + r/L) to the
-#: rotational stiffness about the axes normal to it), which is what makes the model buckle at
-#: a few kN (docs/orthoglide.md, sensitivity to r).
+#: rotational stiffness about the axes normal to it). Kept as a parameter for sensitivity
+#: studies; the buckling of Table 2 does not need it (the legs buckle, docs/orthoglide.md).
 PLATFORM_R = 0.0
 #: Perpendicular platform offset (m): R2 at P + rp·n_i and A_i = ρ e_i + rp n_i, so the position
 #: kinematics is unchanged; rp > 0 makes the planar chain foot–bar–platform arm a Π, rp < 0 a Z
@@ -104,15 +144,15 @@ PLATFORM_RP = 0.0
 EPS_MOBILITY = 1e-6
 
 
-def bar_spring() -> np.ndarray:
-    """4×4 stiffness of one bar (x, z, φx, φy) at its platform-end, bar frame (N/m, N, N·m/rad):
-    the cantilever tip stiffness of :class:`~vjm_pin.beam.Beam` without the in-plane (y, φz)
-    rows, which the parallelogram's pins (axes along z) release."""
+def bar_spring(length: float = L_BAR) -> np.ndarray:
+    """4×4 stiffness of one bar (x, z, φx, φy) of ``length`` (m) at its platform-end, bar frame
+    (N/m, N, N·m/rad): the cantilever tip stiffness of :class:`~vjm_pin.beam.Beam` without the
+    in-plane (y, φz) rows, which the parallelogram's pins (axes along z) release."""
     keep = [0, 2, 3, 4]
-    return np.linalg.inv(BAR.compliance()[np.ix_(keep, keep)])
+    return np.linalg.inv(bar_beam(length).compliance()[np.ix_(keep, keep)])
 
 
-def parallelogram_spring() -> np.ndarray:
+def parallelogram_spring(length: float = L_BAR) -> np.ndarray:
     """Equivalent spring of the parallelogram at the coupler centre, bar frame (src §3.3).
 
     Two bars at r_j = (0, ±d/2, 0); each bar's 6×6 end stiffness K_j (the 4×4 of
@@ -122,7 +162,7 @@ def parallelogram_spring() -> np.ndarray:
     K_φxφx = 2GJ/L + (d²/2)·12EI/L³. Returns the 6×6 (y row zero)."""
     kb = np.zeros((6, 6))
     keep = [0, 2, 3, 4]
-    kb[np.ix_(keep, keep)] = bar_spring()
+    kb[np.ix_(keep, keep)] = bar_spring(length)
     k = np.zeros((6, 6))
     for sgn in (1.0, -1.0):
         r = np.array([0.0, sgn * D_AXLE / 2, 0.0])
@@ -132,11 +172,11 @@ def parallelogram_spring() -> np.ndarray:
     return 0.5 * (k + k.T)
 
 
-def folded_spring() -> np.ndarray:
+def folded_spring(length: float = L_BAR) -> np.ndarray:
     """The 4-D spring (x, z, φx, φy) of the folded variant: the 5-D equivalent spring without φz,
     which is in series with the passive Pa2 joint here (see the module docstring)."""
     keep = [0, 2, 3, 4]
-    return parallelogram_spring()[np.ix_(keep, keep)]
+    return parallelogram_spring(length)[np.ix_(keep, keep)]
 
 
 def foot_axial_compliance() -> float:
@@ -278,8 +318,10 @@ def _leg(
     pa_role = {"role": "spring"} if k_coupler else {"role": "passive", "position": repr(b)}
     link = w.joint(f"{name}_Pa1", "revolute", link, axis=(0, 0, 1))
     w.tag("joint", {"name": f"{name}_Pa1", **pa_role})
-    link = w.joint(f"{name}_bar", "fixed", link, xyz=(L_BAR, 0, 0))
-    link = w.spring(f"{name}_bar_s", link, ("x", "z", "rx", "ry"), k_bar)
+    # the bar in BAR_SEGMENTS rigid segments, each ending in its spring (k_bar: one segment's)
+    for j in range(1, BAR_SEGMENTS + 1):
+        link = w.joint(f"{name}_bar{j}", "fixed", link, xyz=(L_BAR / BAR_SEGMENTS, 0, 0))
+        link = w.spring(f"{name}_bar{j}_s", link, ("x", "z", "rx", "ry"), k_bar)
     link = w.joint(f"{name}_Pa2", "revolute", link, axis=(0, 0, 1))
     pa_role = {"role": "spring"} if k_coupler else {"role": "passive", "position": repr(-b)}
     w.tag("joint", {"name": f"{name}_Pa2", **pa_role})
@@ -316,7 +358,8 @@ def orthoglide_urdf(
         w = _Writer(f"orthoglide-{point}" if variant == "folded" else f"orthoglide-coupled-{point}")
         k_c = parallelogram_spring()[5, 5] if variant == "coupled" else None
         for i in range(3):
-            _leg(w, f"leg{i + 1}", i, p, k_a, k_foot, 0.0, folded_spring(), r, rp, k_c)
+            k_bar = folded_spring(L_BAR / BAR_SEGMENTS)
+            _leg(w, f"leg{i + 1}", i, p, k_a, k_foot, 0.0, k_bar, r, rp, k_c)
     elif variant == "2bar":
         w = _Writer(f"orthoglide-2bar-{point}")
         for i in range(3):
@@ -329,7 +372,7 @@ def orthoglide_urdf(
                     k_a / 2,
                     k_foot / 2,
                     sgn * D_AXLE / 2,
-                    bar_spring(),
+                    bar_spring(L_BAR / BAR_SEGMENTS),
                     r,
                     rp,
                 )
