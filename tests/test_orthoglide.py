@@ -292,5 +292,39 @@ def test_cli_analyze_and_curve_on_the_orthoglide(capsys):
     assert len(cur["points"]) == 3 and cur["critical"] == []  # 1 mm < Δ_cr ≈ 1.5 mm
     assert cur["points"][2]["legs"][0]["name"] == "leg1"
     assert cur["points"][2]["force"] == pytest.approx(3.2e6 * 1e-3, rel=0.02)
+    assert cur["free"] is True and cur["stopped"] == ""
     assert main(["analyze", "orthoglide-q0", "--payload", "1"]) == 2
     assert "parallel model" in capsys.readouterr().err
+
+
+def test_cli_curve_held_platform(capsys):
+    """``--held`` prescribes the whole platform displacement: past Q1's critical point the
+    platform-held curve (legs alone) is still stiff where the free one has snapped."""
+    from vjm_pin.cli import main
+
+    args = ["curve", "orthoglide-q1", "--direction", "-1", "-1", "-1"]
+    args += ["--max-deflection", "0.001", "--steps", "2", "--json"]
+    assert main(args + ["--held"]) == 0
+    held = json.loads(capsys.readouterr().out)
+    assert main(args) == 0
+    free = json.loads(capsys.readouterr().out)
+    assert held["free"] is False and free["free"] is True
+    assert held["critical"] == [] and len(free["critical"]) == 1  # free: 8.0 kN at 0.74 mm
+    assert held["points"][-1]["force"] > 1.2 * free["points"][-1]["force"]
+    assert (
+        main(
+            [
+                "curve",
+                "paper-c-s",
+                "--direction",
+                "1",
+                "0",
+                "0",
+                "--max-deflection",
+                "0.1",
+                "--held",
+            ]
+        )
+        == 2
+    )
+    assert "parallel models" in capsys.readouterr().err

@@ -700,7 +700,7 @@ def solve_free(
         k, lam, v = _free_eigen(rs, eq, b)
         return eq, k, lam, v
 
-    eq, k, lam, v = newton(eq)
+    eq, k, lam, v = newton(eq, patience=20)
     fscale = max(float(np.linalg.norm(eq.wrench)), 1.0)
     converged = np.linalg.norm(b.T @ eq.wrench) <= 1e-6 * fscale
     if leave_saddle and converged and lam.size and lam.min() < 0:

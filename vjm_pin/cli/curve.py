@@ -48,6 +48,12 @@ def add_parser(sub):
         help="split every beam link into K sub-links (models whose springs keep <vjm:beam>)",
     )
     p.add_argument(
+        "--held",
+        action="store_true",
+        help="parallel models: prescribe the whole platform displacement (nothing moves across "
+        "DIRECTION) instead of leaving the platform free across it (no load there)",
+    )
+    p.add_argument(
         "--refine-tol", type=float, default=1e-4, help="relative force tolerance of critical points"
     )
     p.add_argument(
@@ -151,6 +157,8 @@ def run(args) -> int:
 
     if is_parallel_model(args.model):  # parallel robots (<vjm:leg> tags): vjm_pin/cli/parallel_cmds.py
         return run_curve(args)
+    if getattr(args, "held", False):
+        raise InputError("--held applies to parallel models (<vjm:leg> tags) only")
     vm = load_model(args.model, args.subdivide)
     d = finite_vector(args.direction, "--direction")
     if not np.isfinite(args.max_deflection):

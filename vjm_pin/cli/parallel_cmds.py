@@ -146,13 +146,15 @@ def curve_dict(pm, curve) -> dict:
             for c in curve.critical
         ],
         "branches": [],
+        "stopped": curve.stopped,
     }
 
 
 def run_curve(args) -> int:
     """``vjm-pin curve`` on a parallel model: the platform moves along DIRECTION (a
-    translation) and is free across it (no load there), with critical-point detection
-    (:func:`vjm_pin.parallel.trace_robot_force_curve`)."""
+    translation) and is free across it (no load there), or held there with ``--held``, with
+    critical-point detection (:func:`vjm_pin.parallel.trace_robot_force_curve`). A curve that
+    stops early (no equilibrium found) says so, with the reason (``stopped`` in --json)."""
     from ..exceptions import InputError
     from ..parallel import RobotSolver, load_parallel, trace_robot_force_curve
     from .common import dump_json, finite_vector
@@ -170,6 +172,7 @@ def run_curve(args) -> int:
             d,
             args.max_deflection,
             args.steps,
+            free=not getattr(args, "held", False),
             refine_tol=args.refine_tol,
             progress=cb,
         )
@@ -189,12 +192,14 @@ def run_curve(args) -> int:
         return 0
     print(
         f"parallel model {pm.name}: direction {np.round(curve.direction, 4).tolist()} "
-        f"(platform free across it), {len(curve.points)} points"
+        f"(platform {'free' if curve.free else 'held'} across it), {len(curve.points)} points"
     )
     print(f"{'deflection [m]':>18} {'force [N]':>16} {'stiffness [N/m]':>20}  stable")
     for p in curve.points:
         note = "yes" if p.stable else "NO (" + ", ".join(p.unstable_legs) + ")"
         print(f"{p.s:18.8g} {p.force:16.8g} {p.stiffness:20.8g}  {note}")
+    if curve.stopped:
+        print(f"WARNING: the curve stopped before --max-deflection: {curve.stopped}")
     if not curve.critical:
         print("no critical point (no loss of stability, no sharp stiffness drop) in this range")
     for c in curve.critical:
