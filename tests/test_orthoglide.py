@@ -131,6 +131,10 @@ def test_coupled_parallelogram_legs():
             name,
             ev,
         )
+    # four non-zero eigenvalues per leg (two passive joints, R1 and R2: the paper's "rank 4"
+    # reading); the three legs sum to full rank
+    ev = np.linalg.eigvalsh(s @ rs_c.stiffness(eq) @ s)
+    assert ev.min() > 1e-7 * ev.max(), ev
     rot_c = np.linalg.eigvalsh(rs_c.stiffness()[3:, 3:]).min()
     rot_f = np.linalg.eigvalsh(rs_f.stiffness()[3:, 3:]).min()
     assert rot_c > 5 * rot_f
