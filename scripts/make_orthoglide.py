@@ -220,6 +220,18 @@ def leg_angles(p, i: int) -> tuple[float, float, float]:
     return rho, math.atan2(-wl[2], wl[0]), math.asin(wl[1])
 
 
+def leg_coefficients(point: str, direction=(1.0, 1.0, 1.0)) -> np.ndarray:
+    """Axial leg forces per newton of platform force along ``direction`` (positive: the leg is
+    pulled, tension), by rigid-body statics: every bar passes through the platform point, so a
+    force F·d is carried as Σ f_i w_i with w_i = (P − A_i)/L the bar directions.
+    At Q0 the bars are the base axes and f_i = 1/√3 along the bisector (docs/orthoglide.md,
+    "Critical forces and leg statics")."""
+    p = np.asarray(POINTS[point], float)
+    w = np.column_stack([(p - leg_angles(p, i)[0] * E3[i]) / L_BAR for i in range(3)])
+    d = np.asarray(direction, float)
+    return np.linalg.solve(w, d / np.linalg.norm(d))
+
+
 class _Writer:
     def __init__(self, name: str):
         self.root = ET.Element("robot", {"name": name, "xmlns:vjm": NS})

@@ -97,14 +97,6 @@ def analyse(source, max_deflection: float, steps: int, loadings=LOADINGS) -> dic
     return out
 
 
-def leg_coefficients(mo, q: str) -> np.ndarray:
-    """Axial leg forces per unit force along u, rigid-body statics (bars through the platform
-    point): u = Σ f_i w_i, w_i the bar directions at the work point."""
-    p = np.asarray(mo.POINTS[q])
-    w = [(p - mo.leg_angles(p, i)[0] * np.eye(3)[i]) / mo.L_BAR for i in range(3)]
-    return np.linalg.solve(np.array(w).T, U)
-
-
 def _kn(x):
     return f"{x / 1e3:.2f}"
 
@@ -166,13 +158,13 @@ def table_curves(res: dict, variant: str, smax: float) -> str:
 
 def table_statics(res: dict, mo) -> str:
     """Critical forces against the leg-statics prediction F_cr(Q) = f_leg / max_i f_i(Q)."""
-    f_leg = TABLE2["q0"][1] * np.abs(leg_coefficients(mo, "q0")).max()
+    f_leg = TABLE2["q0"][1] * np.abs(mo.leg_coefficients("q0")).max()
     lines = [
         "| point | leg forces per unit F (statics) | Table 2 F_cr [kN] | statics prediction from Q0 [kN] | prediction / Table 2 | folded model, free [kN] | model / Table 2 | leg force at the model's F_cr [kN] |",
         "| --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for q in POINTS:
-        f = leg_coefficients(mo, q)
+        f = mo.leg_coefficients(q)
         pred = f_leg / np.abs(f).max()
         c = res["folded"][q]["curves"][("free", "-u")]["crit"]
         model = _kn(c.force) if c is not None else "none"

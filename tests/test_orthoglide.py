@@ -214,22 +214,11 @@ def _euler_leg_load() -> float:
     return math.pi**2 * 2 * MO.E_AL * i / MO.L_BAR**2
 
 
-def _leg_coefficients(q: str) -> np.ndarray:
-    """Axial leg forces per unit force along u (rigid-body statics, bars through the platform
-    point): u = Σ f_i w_i with w_i the bar directions."""
-    p = np.asarray(MO.POINTS[q])
-    w = []
-    for i in range(3):
-        rho = MO.leg_angles(p, i)[0]
-        w.append((p - rho * np.eye(3)[i]) / MO.L_BAR)
-    return np.linalg.solve(np.array(w).T, U3)
-
-
 def test_bar_section_is_designed_on_euler_load():
     """The bar diameter is derived, not fitted on the model: Euler's load of a leg equals
     Table 2's Q0 critical force over √3 (the leg force at Q0)."""
     assert _euler_leg_load() == pytest.approx(MO.F_CR_TABLE2_Q0 / math.sqrt(3), rel=1e-12)
-    np.testing.assert_allclose(_leg_coefficients("q0"), np.full(3, 1 / math.sqrt(3)), rtol=1e-12)
+    np.testing.assert_allclose(MO.leg_coefficients("q0"), np.full(3, 1 / math.sqrt(3)), rtol=1e-12)
 
 
 def test_every_point_buckles_along_the_bisector():
@@ -256,7 +245,7 @@ def test_critical_leg_force_does_not_depend_on_the_work_point(q):
     c = trace_robot_force_curve(_rs(f"orthoglide-{q}"), -U3, 4e-3, 8)
     assert c.critical, f"{q}: no critical point"
     cp = c.critical[0]
-    leg = cp.force * np.abs(_leg_coefficients(q)).max()
+    leg = cp.force * np.abs(MO.leg_coefficients(q)).max()
     assert leg == pytest.approx(_euler_leg_load(), rel=0.06)
     assert c.points[cp.index].stiffness < cp.stiffness_before / 5
 
