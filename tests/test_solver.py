@@ -12,7 +12,13 @@ from vjm_pin import (
     unloaded_stiffness,
 )
 from vjm_pin.paper_models import paper_model_urdf
-from vjm_pin.solver import blocks_at, check_stability, stiffness_eq30, stiffness_eq32, stiffness_eq33
+from vjm_pin.solver import (
+    blocks_at,
+    check_stability,
+    stiffness_eq30,
+    stiffness_eq32,
+    stiffness_eq33,
+)
 
 from .chains import random_vjm
 
@@ -61,7 +67,13 @@ def test_fixed_point_eq10_and_newton_agree_far_from_buckling():
 # --------------------------------------------------------------------------- eq. 30/32/33
 @pytest.mark.parametrize("seed", range(6))
 def test_eq30_eq32_eq33_agree_at_loaded_stable_equilibria(seed):
-    vm = random_vjm(seed, n_joints=5, n_passive=seed % 3, link_springs=2, spring_dofs=["x", "y", "z", "rx", "ry", "rz"])
+    vm = random_vjm(
+        seed,
+        n_joints=5,
+        n_passive=seed % 3,
+        link_springs=2,
+        spring_dofs=["x", "y", "z", "rx", "ry", "rz"],
+    )
     solver, res = loaded_equilibrium(vm, seed)
     assert np.abs(res.wrench).max() > 1e-3  # really loaded
     b = blocks_at(vm, res.x, res.wrench)
@@ -100,10 +112,21 @@ def test_unloaded_salisbury_for_actuated_chain():
 @pytest.mark.parametrize("seed", range(4))
 def test_unloaded_with_passive_joints_matches_table1(seed):
     """[[J_θ K_θ⁻¹ J_θᵀ, J_q], [J_qᵀ, 0]]⁻¹, upper-left block (Pashkevich et al. [49])."""
-    vm = random_vjm(20 + seed, n_joints=5, n_passive=1 + seed % 2, link_springs=2, spring_dofs=["x", "y", "z", "rx", "ry", "rz"])
+    vm = random_vjm(
+        20 + seed,
+        n_joints=5,
+        n_passive=1 + seed % 2,
+        link_springs=2,
+        spring_dofs=["x", "y", "z", "rx", "ry", "rz"],
+    )
     b = blocks_at(vm, vm.reference, np.zeros(6))
     m = 6
-    big = np.block([[b.J_theta @ np.linalg.inv(vm.K_theta) @ b.J_theta.T, b.J_q], [b.J_q.T, np.zeros((vm.n_q, vm.n_q))]])
+    big = np.block(
+        [
+            [b.J_theta @ np.linalg.inv(vm.K_theta) @ b.J_theta.T, b.J_q],
+            [b.J_q.T, np.zeros((vm.n_q, vm.n_q))],
+        ]
+    )
     k_tab = np.linalg.inv(big)[:m, :m]
     k = unloaded_stiffness(vm).stiffness
     assert rel(k, k_tab) < 1e-8
@@ -184,3 +207,23 @@ def test_non_convergence_is_reported():
     assert err.value.result is not None and not err.value.result.converged
     res = solver.solve([-2.5, 0, 0], raise_on_failure=False)
     assert not res.converged
+
+
+def test_fast_fail_makes_one_attempt():
+    """``fast_fail`` (trial points of line searches): no perturbed restarts, so from the straight
+    Model C chain past buckling it returns the unstable equilibrium a full solve leaves, in a
+    fraction of the iterations; an impossible target raises without continuation."""
+    from vjm_pin.registry import resolve_model
+
+    vm = resolve_model("paper-c-s")
+    solver = EquilibriumSolver(vm)
+    d = [-0.02, 0, 0]
+    full = solver.solve(d)
+    fast = solver.solve(d, fast_fail=True)
+    assert full.stable and "restart" in full.path
+    assert fast.converged and fast.stable is False and fast.path == "newton"
+    assert fast.iterations < full.iterations / 10
+    with pytest.raises(NoEquilibrium):
+        EquilibriumSolver(load_vjm(paper_model_urdf("a", "s")), max_iter=1).solve(
+            [-2.5, 0, 0], fast_fail=True
+        )
