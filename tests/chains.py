@@ -40,8 +40,16 @@ def random_chain_urdf(rng, n_joints=5, prismatic_prob=0.3) -> str:
     return "\n".join(parts)
 
 
-def random_vjm(seed: int, *, n_joints=5, n_passive=1, task=("x", "y", "z", "rx", "ry", "rz"), link_springs=2,
-               spring_dofs=None, kscale=1.0):
+def random_vjm(
+    seed: int,
+    *,
+    n_joints=5,
+    n_passive=1,
+    task=("x", "y", "z", "rx", "ry", "rz"),
+    link_springs=2,
+    spring_dofs=None,
+    kscale=1.0,
+):
     """A random chain: ``n_passive`` passive joints, the other joints actuated with 1-D
     springs, ``link_springs`` links with 6-D/3-D/1-D springs (random SPD matrices),
     random pose and rest values."""
@@ -52,9 +60,35 @@ def random_vjm(seed: int, *, n_joints=5, n_passive=1, task=("x", "y", "z", "rx",
     actuators = {j: float(rng.uniform(5, 50) * kscale) for j in joints if j not in passive}
     positions = {j: float(rng.uniform(-1, 1)) for j in joints}
     links = {}
-    for k, link in enumerate(rng.choice([f"l{i + 1}" for i in range(n_joints)], size=link_springs, replace=False)):
+    for k, link in enumerate(
+        rng.choice([f"l{i + 1}" for i in range(n_joints)], size=link_springs, replace=False)
+    ):
         dofs = spring_dofs if spring_dofs is not None else DOF_SETS[k % len(DOF_SETS)]
-        links[str(link)] = {"stiffness": (random_spd(rng, len(dofs), 20, 200) * kscale).tolist(), "dofs": list(dofs)}
-    spec = {"frame": "tool", "task": list(task), "passive": [str(p) for p in passive], "actuators": actuators,
-            "positions": positions, "links": links}
+        links[str(link)] = {
+            "stiffness": (random_spd(rng, len(dofs), 20, 200) * kscale).tolist(),
+            "dofs": list(dofs),
+        }
+    spec = {
+        "frame": "tool",
+        "task": list(task),
+        "passive": [str(p) for p in passive],
+        "actuators": actuators,
+        "positions": positions,
+        "links": links,
+    }
     return load_vjm(generate_vjm(urdf, spec))
+
+
+def robot_fd_stiffness(rs, eq, h: float) -> np.ndarray:
+    """Central differences (6, 6) of the platform wrench of re-solved robot equilibria
+    (``RobotSolver``) around ``eq``, platform displaced by ±h along each component (m, rad)."""
+    from vjm_pin.kinematics import displace
+
+    fd = np.zeros((6, 6))
+    for j in range(6):
+        dt = np.zeros(6)
+        dt[j] = h
+        fp = rs.solve(target=displace(eq.position, eq.rotation, dt), x0=eq).wrench
+        fm = rs.solve(target=displace(eq.position, eq.rotation, -dt), x0=eq).wrench
+        fd[:, j] = (fp - fm) / (2 * h)
+    return fd

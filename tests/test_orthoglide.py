@@ -19,6 +19,8 @@ from vjm_pin.parallel import (
     trace_robot_force_curve,
 )
 
+from .chains import robot_fd_stiffness
+
 ROOT = Path(__file__).resolve().parent.parent
 U3 = np.ones(3) / math.sqrt(3)
 U6 = np.concatenate([U3, np.zeros(3)])
@@ -178,19 +180,10 @@ def test_wrench_and_displacement_driven_agree_on_the_orthoglide():
 def test_loaded_robot_stiffness_matches_finite_differences():
     """K_C = Σ K_C⁽ⁱ⁾ (eq. 30 per leg) of the loaded Orthoglide at Q3 (a corner, legs tilted)
     against central differences of re-solved robot equilibria."""
-    from vjm_pin.kinematics import displace
-
     rs = _rs("orthoglide-q3")
     eq = rs.solve(np.concatenate([-2e-3 * U3, [2e-4, -1e-4, 3e-4]]))
     kc = rs.stiffness(eq)
-    h = 1e-7
-    fd = np.zeros((6, 6))
-    for j in range(6):
-        dt = np.zeros(6)
-        dt[j] = h
-        fp = rs.solve(target=displace(eq.position, eq.rotation, dt), x0=eq).wrench
-        fm = rs.solve(target=displace(eq.position, eq.rotation, -dt), x0=eq).wrench
-        fd[:, j] = (fp - fm) / (2 * h)
+    fd = robot_fd_stiffness(rs, eq, 1e-7)
     s = np.diag([1, 1, 1, 1 / MO.L_BAR, 1 / MO.L_BAR, 1 / MO.L_BAR])  # every block in N/m
     err = np.linalg.norm(s @ (fd - kc) @ s) / np.linalg.norm(s @ kc @ s)
     assert err < 1e-4, f"relative error of K_C vs finite differences: {err:.2e}"

@@ -7,11 +7,11 @@ import pinocchio as pin
 import pytest
 
 from vjm_pin.exceptions import FrameNotFound, ModelError
-from vjm_pin.kinematics import Kinematics, displace
+from vjm_pin.kinematics import Kinematics
 from vjm_pin.parallel import RobotSolver, load_parallel, trace_robot_curve, transform_stiffness
 from vjm_pin.solver import unloaded_stiffness
 
-from .chains import random_spd
+from .chains import random_spd, robot_fd_stiffness
 
 
 def _f(v):
@@ -181,14 +181,7 @@ def test_loaded_stiffness_matches_finite_differences():
     rs = RobotSolver(load_parallel(robot_urdf(5)))
     eq = rs.solve(np.array([3e-3, 2e-3, -2e-3, 5e-3, 0.0, -4e-3]))
     kc = rs.stiffness(eq)
-    h = 1e-6
-    fd = np.zeros((6, 6))
-    for j in range(6):
-        dt = np.zeros(6)
-        dt[j] = h
-        fp = rs.solve(target=displace(eq.position, eq.rotation, dt), x0=eq).wrench
-        fm = rs.solve(target=displace(eq.position, eq.rotation, -dt), x0=eq).wrench
-        fd[:, j] = (fp - fm) / (2 * h)
+    fd = robot_fd_stiffness(rs, eq, 1e-6)
     err = np.linalg.norm(fd - kc) / np.linalg.norm(kc)
     assert err < 1e-4, f"relative error of K_C vs finite differences: {err:.2e}"
 

@@ -147,33 +147,14 @@ def _progress_bar(total_hint: int):
     return cb, bar
 
 
-def run(args) -> int:
+def trace_and_plot(trace, args, name: str):
+    """Run ``trace(progress)`` with a progress bar on a terminal and write ``--plot``; shared
+    by single-chain and parallel curves. Returns the curve."""
     import numpy as np
 
-    from ..exceptions import InputError
-    from ..solver import trace_curve
-    from .common import dump_json, finite_vector
-    from .parallel_cmds import is_parallel_model, run_curve
-
-    if is_parallel_model(args.model):  # parallel robots (<vjm:leg> tags): vjm_pin/cli/parallel_cmds.py
-        return run_curve(args)
-    if getattr(args, "held", False):
-        raise InputError("--held applies to parallel models (<vjm:leg> tags) only")
-    vm = load_model(args.model, args.subdivide)
-    d = finite_vector(args.direction, "--direction")
-    if not np.isfinite(args.max_deflection):
-        raise InputError(f"--max-deflection must be finite, got {args.max_deflection}")
     cb, bar = _progress_bar(args.steps + 1)
     try:
-        curve = trace_curve(
-            vm,
-            d,
-            args.max_deflection,
-            args.steps,
-            refine_tol=args.refine_tol,
-            all_branches=args.all_branches,
-            progress=cb,
-        )
+        curve = trace(cb)
     finally:
         if bar is not None:
             bar.close()
@@ -183,8 +164,42 @@ def run(args) -> int:
         save_curve_plot(
             curve,
             args.plot,
-            title=f"{vm.name}: force–deflection along {np.round(curve.direction, 3).tolist()}",
+            title=f"{name}: force–deflection along {np.round(curve.direction, 3).tolist()}",
         )
+    return curve
+
+
+def run(args) -> int:
+    import numpy as np
+
+    from ..exceptions import InputError
+    from ..solver import trace_curve
+    from .common import dump_json, finite_vector
+    from .parallel_cmds import is_parallel_model, run_curve
+
+    if is_parallel_model(
+        args.model
+    ):  # parallel robots (<vjm:leg> tags): vjm_pin/cli/parallel_cmds.py
+        return run_curve(args)
+    if getattr(args, "held", False):
+        raise InputError("--held applies to parallel models (<vjm:leg> tags) only")
+    vm = load_model(args.model, args.subdivide)
+    d = finite_vector(args.direction, "--direction")
+    if not np.isfinite(args.max_deflection):
+        raise InputError(f"--max-deflection must be finite, got {args.max_deflection}")
+    curve = trace_and_plot(
+        lambda cb: trace_curve(
+            vm,
+            d,
+            args.max_deflection,
+            args.steps,
+            refine_tol=args.refine_tol,
+            all_branches=args.all_branches,
+            progress=cb,
+        ),
+        args,
+        vm.name,
+    )
     if args.json:
         print(dump_json(curve_dict(vm, curve, args.matrices)))
         return 0
@@ -215,8 +230,14 @@ def run(args) -> int:
                 if 0 <= idx < len(curve.points):
                     p = curve.points[idx]
                     k = stiffness_matrix(vm, p)
-                    print(f"loaded stiffness K_C {label} the critical point (deflection {p.deflection:.6g} {du}):")
-                    print(fmt_matrix(k) if k is not None else "  singular (infinite in some direction)")
+                    print(
+                        f"loaded stiffness K_C {label} the critical point (deflection {p.deflection:.6g} {du}):"
+                    )
+                    print(
+                        fmt_matrix(k)
+                        if k is not None
+                        else "  singular (infinite in some direction)"
+                    )
     for i, br in enumerate(curve.branches):
         print(
             f"branch {i + 1}: {len(br)} points, {'unstable' if not any(p.stable for p in br) else 'mixed'}, "

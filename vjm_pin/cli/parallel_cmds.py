@@ -158,16 +158,15 @@ def run_curve(args) -> int:
     from ..exceptions import InputError
     from ..parallel import RobotSolver, load_parallel, trace_robot_force_curve
     from .common import dump_json, finite_vector
-    from .curve import _progress_bar
+    from .curve import trace_and_plot
 
     _reject(args, {"all_branches": ("--all-branches", False), "subdivide": ("--subdivide", 1)})
     pm = load_parallel(model_path(args.model))
     d = finite_vector(args.direction, "--direction")
     if not np.isfinite(args.max_deflection):
         raise InputError(f"--max-deflection must be finite, got {args.max_deflection}")
-    cb, bar = _progress_bar(args.steps + 1)
-    try:
-        curve = trace_robot_force_curve(
+    curve = trace_and_plot(
+        lambda cb: trace_robot_force_curve(
             RobotSolver(pm),
             d,
             args.max_deflection,
@@ -175,18 +174,10 @@ def run_curve(args) -> int:
             free=not getattr(args, "held", False),
             refine_tol=args.refine_tol,
             progress=cb,
-        )
-    finally:
-        if bar is not None:
-            bar.close()
-    if args.plot:
-        from ..plots import save_curve_plot
-
-        save_curve_plot(
-            curve,
-            args.plot,
-            title=f"{pm.name}: force–deflection along {np.round(curve.direction, 3).tolist()}",
-        )
+        ),
+        args,
+        pm.name,
+    )
     if args.json:
         print(dump_json(curve_dict(pm, curve)))
         return 0
