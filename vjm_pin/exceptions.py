@@ -70,6 +70,11 @@ class InputError(VjmError):
     """A numerical input (target, wrench, configuration) is of the wrong size or not finite."""
 
 
+class OutputError(InputError):
+    """An output path cannot be written (missing or read-only folder, unknown extension,
+    or it is one of the run's input files). Raised before any work starts."""
+
+
 class NoEquilibrium(VjmError):
     """The equilibrium iteration did not converge.
 

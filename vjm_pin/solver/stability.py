@@ -136,3 +136,43 @@ def check_stability(b: Blocks, tol: float = STABILITY_TOL) -> StabilityResult:
     thr = tol * scale
     stable = bool(ev.size == 0 or ev.max() < -thr)
     return StabilityResult(stable, ev, basis.shape[1], float(thr))
+
+
+def check_stability_held(b: Blocks, held: np.ndarray | None = None, tol: float = STABILITY_TOL) -> StabilityResult:
+    """Stability under mixed control: the end held only in the rows ``held`` (paper §4.2).
+
+    The total potential ``½(θ−θ₀)ᵀK_θ(θ−θ₀) − (dead-load work)`` has the Hessian
+    ``K − H`` (``H`` the eq. 16 contraction of the end wrench, whose held part is the
+    reaction, i.e. the Lagrange multiplier); the equilibrium is a constrained minimum iff
+    ``Vᵀ (H − K) V`` is negative definite, ``V`` a basis of the null space of
+    ``held · [J_θ J_q]`` (the displacements that keep the held combinations fixed).
+
+    Args:
+        b: The blocks at the equilibrium, evaluated with the *total* end wrench (dead load
+            plus reaction).
+        held: (k, m) matrix of the held combinations of the m task rows of ``b``; ``None``
+            holds every task row (eq. 23, :func:`check_stability`); a (0, m) matrix holds
+            nothing (pure force control: ``K − H`` itself must be positive definite).
+        tol: Relative threshold, as in :func:`check_stability`.
+
+    Returns:
+        :class:`StabilityResult` (``null_dim`` is the dimension of ``V``).
+    """
+    if held is None:
+        return check_stability(b, tol)
+    held = np.atleast_2d(np.asarray(held, dtype=float))
+    jz = np.hstack([b.J_theta, b.J_q])
+    if held.shape[1] != jz.shape[0]:
+        raise ValueError(f"held has {held.shape[1]} columns, the task has {jz.shape[0]} rows")
+    a = held @ jz
+    nt = b.H_tt.shape[0]
+    if a.shape[0] == 0:
+        basis = np.eye(jz.shape[1])
+    else:
+        basis = null_space(a[:, :nt], a[:, nt:])
+    m = reduced_matrix(b, basis)
+    ev = np.linalg.eigvalsh(m) if m.size else np.zeros(0)
+    scale = spectral_norm(b.K_theta) if b.K_theta.size else 1.0
+    thr = tol * scale
+    stable = bool(ev.size == 0 or ev.max() < -thr)
+    return StabilityResult(stable, ev, basis.shape[1], float(thr))
