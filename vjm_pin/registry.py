@@ -10,10 +10,18 @@ from .model import VjmModel, load_vjm
 
 
 def models_dir() -> Path:
-    """Folder of the bundled VJM URDFs (``$VJM_PIN_MODELS`` or ``<repo>/models/urdf``)."""
+    """Folder of the bundled VJM URDFs.
+
+    ``$VJM_PIN_MODELS`` if set; else the package's own copy ``vjm_pin/data`` (what a wheel
+    carries, see ``setup.py``); else ``<checkout>/models/urdf`` (an editable install, where
+    the models are generated).
+    """
     env = os.environ.get("VJM_PIN_MODELS")
     if env:
         return Path(env)
+    packaged = Path(__file__).resolve().parent / "data"
+    if any(packaged.glob("*.urdf")):
+        return packaged
     return Path(__file__).resolve().parent.parent / "models" / "urdf"
 
 
