@@ -133,7 +133,7 @@ def test_nan_inputs_are_refused():
         (["analyze", "no-such-model", "--deflection", "0", "0", "0"], "unknown model"),
         (["analyze", "paper-a-s", "--deflection", "nan", "0", "0"], "NaN"),
         (["analyze", "paper-a-s", "--deflection", "0", "0"], "3 or 6 numbers"),
-        (["analyze", "paper-a-pi", "--wrench", "-0.5", "0", "0"], "singular"),
+        (["analyze", "paper-a-pi", "--wrench", "0", "0", "-0.5"], "not constrained"),
     ],
 )
 def test_cli_errors_print_one_line_and_exit_2(argv, match, capsys):

@@ -29,6 +29,17 @@ from .exceptions import SpecError
 SECTIONS = ("rectangle", "circle", "tube")
 
 
+def _positive(value, name: str) -> float:
+    """``value`` as a positive finite float; :class:`SpecError` naming ``name`` otherwise."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise SpecError(f"beam '{name}' must be a number, got {value!r}") from None
+    if not math.isfinite(v) or v <= 0.0:
+        raise SpecError(f"beam '{name}' must be positive and finite, got {value!r}")
+    return v
+
+
 def rectangle_torsion_constant(a: float, b: float, terms: int = 50) -> float:
     """Saint-Venant torsion constant of a solid rectangle (m⁴).
 
@@ -73,10 +84,10 @@ def section_properties(section: str, **dims: float) -> SectionProperties:
         for name in names:
             if name not in dims:
                 raise SpecError(f"beam section '{section}' needs '{name}'")
-            v = float(dims[name])
-            if not math.isfinite(v) or v <= 0.0:
-                raise SpecError(f"beam section '{section}': '{name}' must be positive, got {v}")
-            vals.append(v)
+            try:
+                vals.append(_positive(dims[name], name))
+            except SpecError as e:
+                raise SpecError(f"beam section '{section}': {e}") from None
         extra = set(dims) - set(names)
         if extra:
             raise SpecError(
@@ -141,6 +152,8 @@ class Beam:
     def from_dict(cls, d: dict, length: float | None = None) -> Beam:
         """Build from a spec mapping: ``length`` (m, or given), ``section``, its dimensions,
         ``E`` and either ``nu`` or ``G``. Unknown keys raise :class:`SpecError`."""
+        if not isinstance(d, dict):
+            raise SpecError(f"beam must be a mapping of its parameters, got {type(d).__name__} {d!r}")
         d = dict(d)
         known = {"length", "section", "E", "nu", "G"}
         L = d.pop("length", length)
@@ -151,20 +164,26 @@ class Beam:
             raise SpecError("beam needs 'section' (rectangle, circle or tube)")
         if "E" not in d:
             raise SpecError("beam needs Young's modulus 'E' (Pa)")
-        E = float(d.pop("E"))
+        E = _positive(d.pop("E"), "E")
         nu = d.pop("nu", None)
         G = d.pop("G", None)
         if (nu is None) == (G is None):
             raise SpecError("beam needs exactly one of Poisson's ratio 'nu' or shear modulus 'G' (Pa)")
-        G = float(G) if G is not None else E / (2.0 * (1.0 + float(nu)))
-        dims = {k: float(v) for k, v in d.items()}
-        L = float(L)
-        for name, v in (("length", L), ("E", E), ("G", G)):
-            if not math.isfinite(v) or v <= 0.0:
-                raise SpecError(f"beam '{name}' must be positive and finite, got {v}")
-        unknown = set(dims) - {"a", "b", "diameter", "outer_diameter", "wall"}
+        if G is not None:
+            G = _positive(G, "G")
+        else:
+            try:
+                nu = float(nu)
+            except (TypeError, ValueError):
+                raise SpecError(f"beam 'nu' must be a number, got {nu!r}") from None
+            if not -1.0 < nu <= 0.5:
+                raise SpecError(f"beam Poisson's ratio 'nu' must be in (-1, 0.5], got {nu!r}")
+            G = E / (2.0 * (1.0 + nu))
+        L = _positive(L, "length")
+        unknown = set(d) - {"a", "b", "diameter", "outer_diameter", "wall"}
         if unknown:
             raise SpecError(f"unknown beam keys {sorted(unknown)}; known: {sorted(known | {'a', 'b', 'diameter', 'outer_diameter', 'wall'})}")
+        dims = {k: _positive(v, k) for k, v in d.items()}
         section_properties(section, **dims)  # validates
         return cls(L, section, dims, E, G)
 
@@ -187,4 +206,6 @@ class Beam:
 
     def split(self, k: int) -> Beam:
         """The beam of one of ``k`` equal sub-links (length L/k)."""
+        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
+            raise SpecError(f"split(k): k must be a positive integer (number of sub-links), got {k!r}")
         return Beam(self.length / k, self.section, dict(self.dims), self.E, self.G)

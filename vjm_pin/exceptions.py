@@ -100,3 +100,90 @@ class SingularStiffness(VjmError):
     def __init__(self, message: str, eigenvalues=None):
         self.eigenvalues = eigenvalues
         super().__init__(message)
+
+
+class ArgumentError(InputError):
+    """A library function was called with an argument of the wrong type or an unknown value.
+    The message names the argument and the allowed values (types, names or range)."""
+
+
+class UnknownVjmTag(ModelError):
+    """An element or attribute in the ``vjm`` namespace (``urn:vjm-pin:1``) that the format
+    does not define, or a ``vjm`` element in a place where it does not belong.
+
+    Attributes:
+        name: The unknown element (``vjm:...``) or attribute name.
+        parent: The element it was found in (``robot``, ``vjm:spring``, ...).
+        line: Line number in the file (None if not known).
+        candidates: The names that are allowed there.
+    """
+
+    def __init__(self, message: str, name: str, parent: str, line: int | None, candidates: Sequence[str]):
+        self.name = name
+        self.parent = parent
+        self.line = line
+        self.candidates = list(candidates)
+        super().__init__(message)
+
+
+class SpecProblems(SpecError):
+    """A spring specification with one or more problems, all reported at once (one line).
+
+    Attributes:
+        source: Where the specification came from (file name, ``<YAML text>`` or ``<dict>``).
+        problems: One ``"yaml.path: what is wrong"`` string per problem, document order.
+    """
+
+    def __init__(self, source: str, problems: Sequence[str]):
+        self.source = source
+        self.problems = list(problems)
+        n = len(self.problems)
+        head = f"spring specification {source}: " + (f"{n} problems: " if n > 1 else "")
+        super().__init__(head + "; ".join(self.problems))
+
+
+class MapInterrupted(KeyboardInterrupt):
+    """A workspace map was interrupted (Ctrl-C); the workers are already stopped.
+
+    A :class:`KeyboardInterrupt`, not a :class:`VjmError`: code that handles Ctrl-C in
+    general still sees it. It carries what was finished.
+
+    Attributes:
+        result: A :class:`~vjm_pin.maps.MapResult` of the poses finished before the
+            interrupt (possibly none), in the order they were requested.
+        requested: The number of poses the map was asked for.
+    """
+
+    def __init__(self, result, requested: int):
+        self.result = result
+        self.requested = int(requested)
+        done = 0 if result is None else int(result.poses.shape[0])
+        super().__init__(f"map interrupted after {done} of {self.requested} poses")
+
+
+class SchedulerError(InputError):
+    """No Dask scheduler can be used at an address (malformed, nothing listens, or what
+    answers is not a scheduler).
+
+    Attributes:
+        address: The address as given. reason: What went wrong.
+    """
+
+    def __init__(self, address, reason: str, name: str = "Dask scheduler"):
+        self.address = address
+        self.reason = reason
+        super().__init__(f"{name} '{address}': {reason}; expected tcp://HOST:PORT (e.g. tcp://127.0.0.1:8786)")
+
+
+class EquilibriumCheckError(NoEquilibrium):
+    """An equilibrium failed its own check (eq. 5 residual per unit, the stability verdicts
+    recomputed, or K_C against re-solved neighbouring equilibria), also after a retry.
+
+    Attributes:
+        result: The checked :class:`~vjm_pin.solver.EquilibriumResult`.
+        checks: What was measured (dict of numbers and verdicts).
+    """
+
+    def __init__(self, message: str, result=None, checks=None):
+        self.checks = dict(checks or {})
+        super().__init__(message, result, float(self.checks.get("statics_relative", float("nan"))))

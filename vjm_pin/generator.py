@@ -1,6 +1,7 @@
 """Generate VJM URDF models from a rigid URDF and a spring specification.
 
-The specification (a YAML file or the same as a dict) has the keys:
+The specification (a YAML file or the same as a dict; schema and validation in
+:mod:`vjm_pin.spec`) has the keys:
 
 ``name``
     Optional model name (default: the URDF robot name).
@@ -22,7 +23,9 @@ The specification (a YAML file or the same as a dict) has the keys:
 ``links``
     Mapping link → link spring. Each is ``{beam: {...}}`` or ``{stiffness: [[...]]}``,
     with optional ``dofs`` (a subset of ``x y z rx ry rz``, default all six; e.g.
-    ``[x, y, rz]`` for planar springs) and ``rest`` (θ0, default zeros).
+    ``[x, y, rz]`` for planar springs) and ``rest`` (θ0, default zeros). ``dofs`` may be in
+    any order: the rows/columns of ``stiffness`` and the values of ``rest`` follow it and are
+    permuted to the spring joints, which are created in the order ``x y z rx ry rz``.
 
     - ``beam``: ``length`` (m; default: the distance from the link origin to its tip),
       ``section`` (``rectangle`` with ``a`` along the beam z axis and ``b`` along y,
@@ -46,43 +49,27 @@ from __future__ import annotations
 import copy
 import math
 import xml.etree.ElementTree as ET
-from pathlib import Path
 
 import numpy as np
 
 from .beam import Beam
 from .exceptions import FrameNotFound, JointNotFound, SpecError, UrdfParseError
 from .model import COMPONENTS, NS, _read_root, build_pin_model, check_stiffness_matrix
+from .spec import SPEC_KEYS, LinkSpec, read_spec  # noqa: F401 - SPEC_KEYS re-exported
 
 _Q = f"{{{NS}}}"
-SPEC_KEYS = {"name", "frame", "task", "actuators", "passive", "positions", "links", "subdivide"}
-LINK_KEYS = {"beam", "stiffness", "dofs", "rest"}
+LINK_KEYS = set(LinkSpec.model_fields)
 SPRING_SUFFIX = ("tx", "ty", "tz", "rx", "ry", "rz")
 
 
 def load_spec(spec) -> dict:
-    """Read a spec from a dict, a YAML path or YAML text, and check its top-level keys."""
-    if isinstance(spec, dict):
-        data = copy.deepcopy(spec)
-    else:
-        import yaml
+    """Read a spec from a dict, a YAML path or YAML text and validate the whole document
+    (:func:`vjm_pin.spec.read_spec`; ``frame`` required).
 
-        p = Path(spec) if not (isinstance(spec, str) and "\n" in spec) else None
-        text = p.read_text() if p is not None and p.is_file() else None
-        if p is not None and text is None:
-            raise SpecError(f"spring specification file not found: {spec}")
-        try:
-            data = yaml.safe_load(text if text is not None else spec)
-        except yaml.YAMLError as e:
-            raise SpecError(f"spring specification is not valid YAML: {e}") from None
-        if not isinstance(data, dict):
-            raise SpecError("spring specification must be a mapping of keys")
-    unknown = set(data) - SPEC_KEYS
-    if unknown:
-        raise SpecError(f"unknown spec key(s) {sorted(unknown)}; known keys: {sorted(SPEC_KEYS)}")
-    if "frame" not in data:
-        raise SpecError("spec needs 'frame': the end (task) frame")
-    return data
+    Raises:
+        SpecProblems: a :class:`SpecError` listing every problem with its YAML path.
+    """
+    return read_spec(spec, require_frame=True)
 
 
 def _components(value, what: str) -> list[str]:
@@ -132,14 +119,19 @@ def beam_frame(tip: np.ndarray) -> np.ndarray:
 
 
 def link_spring_matrix(entry: dict, link: str, tip: np.ndarray, length: float | None = None):
-    """Stiffness (n, n), dofs, rest and beam dict of one link spring entry."""
+    """Stiffness (n, n), dofs, rest and beam dict of one link spring entry.
+
+    ``dofs`` may be given in any order: a ``stiffness`` matrix and ``rest`` are read in the
+    order given and returned permuted to the canonical order ``x y z rx ry rz`` of the
+    generated spring joints (``P K Pᵀ`` with the permutation ``P``)."""
     unknown = set(entry) - LINK_KEYS
     if unknown:
         raise SpecError(f"link '{link}': unknown key(s) {sorted(unknown)}; known: {sorted(LINK_KEYS)}")
     if ("beam" in entry) == ("stiffness" in entry):
         raise SpecError(f"link '{link}': give exactly one of 'beam' or 'stiffness'")
-    dofs = _components(entry.get("dofs", list(COMPONENTS)), f"link '{link}' dofs")
-    dofs = [c for c in COMPONENTS if c in dofs]
+    given = _components(entry.get("dofs", list(COMPONENTS)), f"link '{link}' dofs")
+    dofs = [c for c in COMPONENTS if c in given]
+    perm = [given.index(c) for c in dofs]  # canonical position i <- given position perm[i]
     idx = [COMPONENTS.index(c) for c in dofs]
     n = len(dofs)
     beam_dict = None
@@ -167,11 +159,15 @@ def link_spring_matrix(entry: dict, link: str, tip: np.ndarray, length: float | 
         k = np.asarray(entry["stiffness"], dtype=float) if _is_matrix(entry["stiffness"]) else None
         if k is None:
             raise SpecError(f"link '{link}': 'stiffness' must be a {n}x{n} matrix (list of rows)")
+        k = check_stiffness_matrix(k, n, link)[np.ix_(perm, perm)]
     k = check_stiffness_matrix(k, n, link)
-    rest = np.asarray(entry.get("rest", np.zeros(n)), dtype=float).ravel()
+    try:
+        rest = np.asarray(entry.get("rest", np.zeros(n)), dtype=float).ravel()
+    except (TypeError, ValueError):
+        rest = np.zeros(0)
     if rest.size != n or not np.all(np.isfinite(rest)):
-        raise SpecError(f"link '{link}': 'rest' must have {n} finite values")
-    return k, dofs, rest, beam_dict
+        raise SpecError(f"link '{link}': 'rest' must have {n} finite values (one per dof, in the order of 'dofs')")
+    return k, dofs, rest[perm], beam_dict
 
 
 def _is_matrix(v) -> bool:
@@ -208,7 +204,7 @@ def generate_vjm(rigid_urdf, spec) -> str:
         UrdfParseError: a malformed URDF.
     """
     spec = load_spec(spec)
-    root, text, label = _read_root(rigid_urdf)
+    root, _text, label = _read_root(rigid_urdf)
     root = copy.deepcopy(root)
     for el in list(root):
         if el.tag.startswith(_Q):

@@ -23,6 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from .exceptions import ArgumentError, InputError
+
 
 def fix_hessian_layout(h: np.ndarray) -> np.ndarray:
     """Reorder a kinematic Hessian returned by Pinocchio 4.1 so that
@@ -56,8 +58,9 @@ class KinematicState:
     def psi_hessian(self, wrench: np.ndarray) -> np.ndarray:
         """(nv, nv) ``H[i, j] = ∂(J[:, i]·F)/∂x_j`` for the 6-D wrench ``F`` (eq. 16)."""
         if self.hessian is None:
-            raise ValueError("this KinematicState was evaluated without Hessian")
-        return contract_hessian(self.hessian, np.asarray(wrench, float))
+            raise InputError("this KinematicState was evaluated without Hessian: evaluate(x, hessian=True)")
+        wrench = _vector(wrench, 6, "wrench", "(Fx, Fy, Fz, Mx, My, Mz) in N and N·m")
+        return contract_hessian(self.hessian, wrench)
 
 
 def contract_hessian(hessian: np.ndarray, wrench: np.ndarray) -> np.ndarray:
@@ -82,6 +85,14 @@ class Kinematics:
     """
 
     def __init__(self, model: pin.Model, frame_id: int):
+        if not isinstance(model, pin.Model):
+            raise ArgumentError(f"model must be a pinocchio.Model, got {type(model).__name__}")
+        if isinstance(frame_id, bool) or not isinstance(frame_id, (int, np.integer)) or not (
+            0 <= frame_id < model.nframes
+        ):
+            raise ArgumentError(
+                f"frame_id must be a frame index 0..{model.nframes - 1} of the model, got {frame_id!r}"
+            )
         self.model = model
         self.data = model.createData()
         self.frame_id = int(frame_id)
@@ -89,6 +100,7 @@ class Kinematics:
 
     def placement(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """End frame (position (3,) m, rotation (3, 3)) at configuration ``x``."""
+        x = _vector(x, self.model.nq, "x", "the configuration (m, rad)")
         pin.framesForwardKinematics(self.model, self.data, x)
         m = self.data.oMf[self.frame_id]
         return m.translation.copy(), m.rotation.copy()
@@ -97,7 +109,7 @@ class Kinematics:
         """Placement, Jacobian and (optionally) kinematic Hessian at ``x`` (nq,).
 
         The returned state is shared with later calls at the same ``x``: do not modify it."""
-        x = np.asarray(x, dtype=float)
+        x = _vector(x, self.model.nq, "x", "the configuration (m, rad)")
         key = x.tobytes()
         last = self._last
         if last is not None and last[0] == key and (last[1].hessian is not None or not hessian):
@@ -118,6 +130,17 @@ class Kinematics:
         state = KinematicState(m.translation.copy(), m.rotation.copy(), jac.copy(), hes)
         self._last = (key, state)
         return state
+
+
+def _vector(v, n: int, name: str, meaning: str) -> np.ndarray:
+    """``v`` as a float array of shape (n,); :class:`InputError` naming ``name`` otherwise."""
+    try:
+        a = np.asarray(v, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"{name} must be {n} numbers ({meaning}), got {v!r}") from None
+    if a.shape != (n,):
+        raise InputError(f"{name} must be {n} numbers ({meaning}), got shape {a.shape}")
+    return a
 
 
 def pose_error(p_target, r_target, p, r) -> np.ndarray:

@@ -27,12 +27,14 @@ from pathlib import Path
 import numpy as np
 
 from .exceptions import (
+    ArgumentError,
     FrameNotFound,
     InputError,
     JointNotFound,
     ModelError,
     RoleError,
     StiffnessMatrixError,
+    UnknownVjmTag,
     UrdfParseError,
 )
 
@@ -44,6 +46,165 @@ _Q = f"{{{NS}}}"
 ET.register_namespace("vjm", NS)
 
 
+@dataclass(frozen=True)
+class VjmTag:
+    """One element of the ``vjm`` namespace.
+
+    Attributes:
+        parent: Where it may appear: ``"robot"`` (a child of the root) or ``"vjm:spring"``.
+        attributes: Its attribute names (no other attribute is accepted).
+        meaning: What it says (rendered into ``docs/format.md``).
+        text: Whether its text content carries data (numbers).
+    """
+
+    parent: str
+    attributes: tuple[str, ...]
+    meaning: str
+    text: bool = False
+
+
+#: Every element of the ``vjm`` namespace, its place and its attributes: the one table that
+#: :func:`check_vjm_tags` (the loader) enforces and that ``docs/format.md`` shows
+#: (:func:`vjm_tags_markdown`; a test keeps the two equal). No attribute of the ``vjm``
+#: namespace is defined on other elements.
+VJM_TAGS: dict[str, VjmTag] = {
+    "task": VjmTag(
+        "robot",
+        ("frame", "components"),
+        "Exactly one. End (task) frame and the constrained components among `x y z rx ry rz` "
+        "(default all six). A chain ending in a passive spherical joint constrains `x y z` only; "
+        "a planar chain `x y`.",
+    ),
+    "joint": VjmTag(
+        "robot",
+        ("name", "role", "position", "stiffness"),
+        "One per non-fixed joint. `role` is `passive` (perfect passive joint, coordinate in `q`), "
+        "`spring` (virtual spring or preloaded passive joint, coordinate in `θ`) or `actuated`. An "
+        "actuated joint with `stiffness` (N·m/rad or N/m) is a 1-D spring whose rest value θ₀ is its "
+        "`position` (the commanded value); without `stiffness` it is locked at `position`. For "
+        "passive joints `position` is the unloaded value (one number, m or rad).",
+    ),
+    "spring": VjmTag(
+        "robot",
+        ("name", "joints", "link"),
+        "One spring group (unique `name`): its joints (role `spring`) in matrix order, the link "
+        "whose flexibility it models.",
+    ),
+    "stiffness": VjmTag(
+        "vjm:spring",
+        (),
+        "The n×n symmetric positive-definite stiffness (N/m, N·m/rad, N/rad), in the order of the "
+        "spring's `joints`, row-major.",
+        text=True,
+    ),
+    "rest": VjmTag("vjm:spring", (), "Rest values θ₀ (preload) in the order of `joints`, default zeros.", text=True),
+    "beam": VjmTag(
+        "vjm:spring",
+        ("length", "section", "a", "b", "diameter", "outer_diameter", "wall", "E", "G", "nu", "dofs", "subdivide"),
+        "Provenance: the beam the matrix was computed from (kept so that results can be read in SI "
+        "and links can be subdivided).",
+    ),
+    "platform": VjmTag(
+        "robot",
+        ("name", "components"),
+        "Parallel robots (docs/parallel.md), optional: platform name and constrained components.",
+    ),
+    "leg": VjmTag(
+        "robot",
+        ("name", "frame", "offset"),
+        "Parallel robots (docs/parallel.md): one leg, the link where it meets the platform and the "
+        "platform point in that link's frame (m).",
+    ),
+}
+
+
+def vjm_tags_markdown() -> str:
+    """The table of :data:`VJM_TAGS` as Markdown (the one in ``docs/format.md``)."""
+    rows = ["| element | inside | attributes | meaning |", "|---|---|---|---|"]
+    for name, tag in VJM_TAGS.items():
+        attrs = " ".join(f"`{a}`" for a in tag.attributes) or ("text (numbers)" if tag.text else "—")
+        rows.append(f"| `vjm:{name}` | `<{tag.parent}>` | {attrs} | {tag.meaning} |")
+    return "\n".join(rows) + "\n"
+
+
+def _did_you_mean(name: str, known) -> str:
+    import difflib
+
+    close = difflib.get_close_matches(name, list(known), n=1, cutoff=0.6)
+    return f"did you mean '{close[0]}'? " if close else ""
+
+
+def check_vjm_tags(text: str, label: str = "<urdf string>") -> None:
+    """Refuse what the loader would otherwise ignore: an element or attribute of the ``vjm``
+    namespace that :data:`VJM_TAGS` does not define, a ``vjm`` element out of its place, an
+    un-prefixed element inside a ``vjm`` element (``<rest>`` for ``<vjm:rest>``) and an
+    element of another version of the format (``urn:vjm-pin:N``).
+
+    Raises:
+        UnknownVjmTag: naming the element or attribute, its parent element and line, and the
+            known names (with a close match when there is one).
+    """
+    if "urn:vjm-pin" not in text:
+        return
+    from xml.parsers import expat
+
+    parser = expat.ParserCreate(namespace_separator="}")
+    stack: list[str] = []
+
+    def fail(what: str, name: str, parent: str, known, hint_name: str | None = None) -> None:
+        line = parser.CurrentLineNumber
+        hint = _did_you_mean(hint_name or name, known)
+        listed = f"; {hint}known: {', '.join(known)}" if known else (f"; {hint}" if hint else "")
+        raise UnknownVjmTag(f"{label}, line {line}: {what}{listed}", name, parent, line, known)
+
+    def start(name: str, attrs: dict) -> None:
+        uri, _, local = name.rpartition("}")
+        parent = stack[-1] if stack else ""
+        shown = f"vjm:{local}" if uri == NS else local
+        if uri == NS:
+            here = [f"vjm:{n}" for n, t in VJM_TAGS.items() if t.parent == parent]
+            tag = VJM_TAGS.get(local)
+            if tag is None:
+                fail(f"unknown element <vjm:{local}> inside <{parent}>", shown, parent, here)
+            if tag.parent != parent:
+                fail(f"element <vjm:{local}> inside <{parent}> is out of place: it belongs inside <{tag.parent}>",
+                     shown, parent, [])
+            for a in attrs:
+                a_uri, _, a_local = a.rpartition("}")
+                if a_uri or a_local not in tag.attributes:
+                    fail(f"unknown attribute '{a_local}' of <vjm:{local}>", a_local, shown, tag.attributes)
+        elif uri.startswith("urn:vjm-pin:"):
+            raise UnknownVjmTag(
+                f"{label}, line {parser.CurrentLineNumber}: element <{local}> is in namespace '{uri}'; this "
+                f"version of vjm_pin reads '{NS}'",
+                local,
+                parent,
+                parser.CurrentLineNumber,
+                [],
+            )
+        else:
+            if parent.startswith("vjm:"):
+                inner = [f"vjm:{n}" for n, t in VJM_TAGS.items() if t.parent == parent]
+                fail(f"element <{local}> inside <{parent}> has no vjm: prefix", local, parent, inner, f"vjm:{local}")
+            for a in attrs:
+                a_uri, _, a_local = a.rpartition("}")
+                if a_uri == NS:
+                    fail(f"unknown attribute 'vjm:{a_local}' of <{local}>: the vjm namespace defines no attributes "
+                         "on URDF elements (roles and springs are <vjm:joint>/<vjm:spring> elements)",
+                         a_local, shown, [])
+        stack.append(shown)
+
+    def end(name: str) -> None:
+        stack.pop()
+
+    parser.StartElementHandler = start
+    parser.EndElementHandler = end
+    try:
+        parser.Parse(text, True)
+    except expat.ExpatError as e:  # pragma: no cover - ElementTree parsed the same text first
+        raise UrdfParseError(f"{label}: malformed XML: {e}") from None
+
+
 def _parse_numbers(text: str | None, what: str) -> np.ndarray:
     try:
         vals = np.array([float(v) for v in (text or "").replace(",", " ").split()], dtype=float)
@@ -52,6 +213,14 @@ def _parse_numbers(text: str | None, what: str) -> np.ndarray:
     if not np.all(np.isfinite(vals)):
         raise ModelError(f"{what}: contains NaN or infinite values")
     return vals
+
+
+def _parse_number(text: str | None, what: str) -> float:
+    """Exactly one finite number from an attribute value; :class:`ModelError` otherwise."""
+    vals = _parse_numbers(text, what)
+    if vals.size != 1:
+        raise ModelError(f"{what}: expected one number, got '{text}'")
+    return float(vals[0])
 
 
 def check_stiffness_matrix(k: np.ndarray, n: int, name: str) -> np.ndarray:
@@ -165,8 +334,8 @@ class VjmModel:
     def joint_index(self, name: str) -> int:
         """Configuration index of joint ``name``; :class:`JointNotFound` if unknown."""
         names = self.joint_names
-        if name not in names:
-            raise JointNotFound(name, names)
+        if not isinstance(name, str) or name not in names:
+            raise JointNotFound(str(name), names)
         return names.index(name)
 
     def with_positions(self, positions: dict) -> VjmModel:
@@ -178,8 +347,14 @@ class VjmModel:
         ref = self.reference.copy()
         theta0 = self.theta0.copy()
         springs = list(self.springs)
+        if not isinstance(positions, dict):
+            raise ArgumentError(
+                f"positions must be a dict {{joint name: value (m or rad)}}, got {type(positions).__name__}"
+            )
         for name, value in positions.items():
             i = self.joint_index(name)
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+                raise ArgumentError(f"joint '{name}': position must be a number (m or rad), got {value!r}")
             v = float(value)
             if not math.isfinite(v):
                 raise InputError(f"joint '{name}': position must be finite, got {value}")
@@ -196,25 +371,52 @@ class VjmModel:
         return replace(self, reference=ref, theta0=theta0, springs=tuple(springs))
 
 
+def _read_text(path: Path, what: str = "URDF") -> str:
+    """The text of the file at ``path``; :class:`UrdfParseError` (missing file, folder,
+    unreadable or not UTF-8 text) otherwise."""
+    if path.is_dir():
+        raise UrdfParseError(f"{path}: is a folder, not a {what} file")
+    if not path.is_file():
+        raise UrdfParseError(f"{what} file not found: {path}")
+    try:
+        data = path.read_bytes()
+    except OSError as e:
+        raise UrdfParseError(f"{path}: cannot read the {what} file ({e.strerror or e})") from None
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise UrdfParseError(
+            f"{path}: not a {what} text file (not UTF-8: byte 0x{data[e.start]:02x} at offset {e.start})"
+        ) from None
+
+
 def _read_root(source: str | Path) -> tuple[ET.Element, str, str]:
-    """Parse URDF text or a path; return (root element, text, display name)."""
+    """Parse URDF text or a path; return (root element, text, display name).
+
+    A ``str`` containing ``<`` is XML text, any other ``str`` or a :class:`~pathlib.Path` a
+    file name. The ``vjm`` tags are checked (:func:`check_vjm_tags`)."""
     text: str
     label: str
     if isinstance(source, Path) or (isinstance(source, str) and "<" not in source):
+        if not str(source).strip():
+            raise ArgumentError("URDF source is empty: give a file path or URDF (XML) text")
         p = Path(source)
-        if not p.is_file():
-            raise UrdfParseError(f"URDF file not found: {p}")
-        text = p.read_text()
+        text = _read_text(p)
         label = str(p)
-    else:
-        text = str(source)
+    elif isinstance(source, str):
+        text = source
         label = "<urdf string>"
+    else:
+        raise ArgumentError(
+            f"URDF source must be a file path (str or pathlib.Path) or URDF text (str), got {type(source).__name__}"
+        )
     try:
         root = ET.fromstring(text)
     except ET.ParseError as e:
         raise UrdfParseError(f"{label}: malformed XML: {e}") from None
     if root.tag != "robot":
-        raise UrdfParseError(f"{label}: root element is <{root.tag}>, expected <robot>")
+        raise UrdfParseError(f"{label}: root element is <{root.tag}>, expected <robot> (not a URDF)")
+    check_vjm_tags(text, label)
     return root, text, label
 
 
@@ -285,11 +487,11 @@ def load_vjm(source: str | Path) -> VjmModel:
         if role not in ROLES:
             raise RoleError(f"joint '{name}': role '{role}' is not one of {list(ROLES)}")
         if el.get("position") is not None:
-            (positions[name],) = _parse_numbers(el.get("position"), f"joint '{name}' position")[:1]
+            positions[name] = _parse_number(el.get("position"), f"joint '{name}' position")
         if el.get("stiffness") is not None:
             if role != "actuated":
                 raise RoleError(f"joint '{name}': 'stiffness' is only for actuated joints (springs use <vjm:spring>)")
-            (k,) = _parse_numbers(el.get("stiffness"), f"joint '{name}' stiffness")[:1]
+            k = _parse_number(el.get("stiffness"), f"joint '{name}' stiffness")
             check_stiffness_matrix(np.array([[k]]), 1, name)
             act_stiff[name] = float(k)
         roles[name] = role
@@ -301,7 +503,11 @@ def load_vjm(source: str | Path) -> VjmModel:
     springs: list[SpringGroup] = []
     owner: dict[str, str] = {}
     for el in root.findall(f"{_Q}spring"):
-        sname = el.get("name") or "<unnamed>"
+        sname = el.get("name")
+        if not sname:
+            raise ModelError(f"{label}: <vjm:spring> without 'name'")
+        if any(g.name == sname for g in springs):
+            raise ModelError(f"{label}: two <vjm:spring> elements named '{sname}'")
         joints = tuple((el.get("joints") or "").split())
         if not joints:
             raise ModelError(f"spring '{sname}' lists no joints")
@@ -332,7 +538,7 @@ def load_vjm(source: str | Path) -> VjmModel:
         if beam_el is not None:
             beam = {}
             for key, v in beam_el.attrib.items():
-                beam[key] = v if key in ("section", "dofs") else float(v)
+                beam[key] = v if key in ("section", "dofs") else _parse_number(v, f"spring '{sname}' beam '{key}'")
         springs.append(SpringGroup(sname, joints, k, rest, el.get("link"), beam))
     orphans = [n for n, r in roles.items() if r == "spring" and n not in owner]
     if orphans:

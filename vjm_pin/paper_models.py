@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 
+from .exceptions import ArgumentError
 from .generator import generate_vjm
 
 POSTURES = {"s": (0.0, 0.0), "pi": (-30.0, -30.0), "z": (30.0, -30.0)}
@@ -94,10 +95,12 @@ def paper_spec(model: str, posture: str, *, length: float = 1.0, k_theta: float 
         beam: Beam parameters of the links for B and C (``section``, ``a``, ``b``, ``E``,
             ``nu``); the length is the link length.
     """
+    if not isinstance(model, str) or model.lower() not in ("a", "b", "c"):
+        raise ArgumentError(f"unknown paper model {model!r}; choose 'a', 'b' or 'c'")
+    if not isinstance(posture, str) or posture.lower() not in POSTURES:
+        raise ArgumentError(f"unknown posture {posture!r}; choose one of {list(POSTURES)}")
     model = model.lower()
     posture = posture.lower()
-    if posture not in POSTURES:
-        raise ValueError(f"unknown posture '{posture}'; choose one of {list(POSTURES)}")
     qa1, qa2 = (math.radians(v) for v in POSTURES[posture])
     q0 = base_angle(qa1, qa2)
     positions = {"base_z": q0, "qa1": qa1, "qa2": qa2}
@@ -112,7 +115,7 @@ def paper_spec(model: str, posture: str, *, length: float = 1.0, k_theta: float 
         spec.update(task=["x", "y"], actuators={"qa1": k_theta, "qa2": k_theta})
     elif model in ("b", "c"):
         if beam is None:
-            raise ValueError("models B and C need beam parameters")
+            raise ArgumentError("models B and C need beam parameters: beam=PAPER_BEAM or a dict like it")
         entry = {"beam": dict(beam)}
         if model == "b":
             entry["dofs"] = ["x", "y", "rz"]
@@ -123,12 +126,10 @@ def paper_spec(model: str, posture: str, *, length: float = 1.0, k_theta: float 
         )
         if subdivide > 1:
             spec["subdivide"] = subdivide
-    else:
-        raise ValueError(f"unknown model '{model}'; choose a, b or c")
     return spec
 
 
 def paper_model_urdf(model: str, posture: str, **kwargs) -> str:
     """VJM URDF text of a paper model (see :func:`paper_spec`)."""
-    planar = model.lower() in ("a", "b")
+    planar = isinstance(model, str) and model.lower() in ("a", "b")
     return generate_vjm(rigid_chain_urdf(kwargs.get("length", 1.0), planar=planar), paper_spec(model, posture, **kwargs))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from .exceptions import ModelError
+from .exceptions import ArgumentError, ModelError
 from .model import VjmModel, load_vjm
 
 
@@ -37,8 +37,10 @@ def is_vjm_urdf(path: Path) -> bool:
 
     try:
         return NS in Path(path).read_text()
-    except (OSError, UnicodeDecodeError) as e:
-        raise ModelError(f"cannot read model file {path}: {e}") from None
+    except UnicodeDecodeError:
+        raise ModelError(f"{path}: not a URDF text file (not UTF-8)") from None
+    except OSError as e:
+        raise ModelError(f"cannot read model file {path}: {e.strerror or e}") from None
 
 
 def resolve(name_or_path: str, *, frame=None, q=None, pose_name=None, springs=None):
@@ -60,7 +62,16 @@ def resolve(name_or_path: str, *, frame=None, q=None, pose_name=None, springs=No
     """
     from .robots import UnknownRobot, build_robot, robot_names
 
+    if not isinstance(name_or_path, (str, Path)) or not str(name_or_path).strip():
+        raise ArgumentError(
+            "name_or_path must be a model name or a URDF path (str or pathlib.Path), "
+            f"got {type(name_or_path).__name__} {name_or_path!r}"
+        )
+    if q is not None and not isinstance(q, dict):
+        raise ArgumentError(f"q must be a dict {{joint name: value (rad or m)}}, got {type(q).__name__} {q!r}")
     p = Path(name_or_path)
+    if p.is_dir():
+        raise ModelError(f"{p}: is a folder, not a model file")
     vjm_path = None
     if p.is_file():
         if is_vjm_urdf(p):

@@ -33,7 +33,15 @@ from pathlib import Path
 
 import numpy as np
 
-from .exceptions import FrameNotFound, InputError, JointNotFound, ModelError, SpecError
+from .exceptions import (
+    ArgumentError,
+    FrameNotFound,
+    InputError,
+    JointNotFound,
+    ModelError,
+    SpecError,
+    UrdfParseError,
+)
 from .model import VjmModel, _read_root, load_vjm
 
 #: Default actuator stiffness of revolute joints (N·m/rad); see the module docstring.
@@ -55,11 +63,12 @@ class UnknownRobot(ModelError):
 
         self.name = name
         self.candidates = list(candidates)
-        close = difflib.get_close_matches(name, self.candidates, n=3)
-        hint = f"did you mean {', '.join(close)}? " if close else ""
+        self.close = difflib.get_close_matches(name, self.candidates, n=3)
+        hint = f"; did you mean {', '.join(self.close)}?" if self.close else ""
+        # one line: the full list (dozens of names) is in `candidates` and in `vjm-pin models`
         super().__init__(
             f"unknown model or robot '{name}': not a file, not a bundled model and not an "
-            f"example-robot-data robot; {hint}known: {', '.join(self.candidates)}"
+            f"example-robot-data robot ({len(self.candidates)} known names){hint}"
         )
 
 
@@ -196,14 +205,26 @@ def urdf_tree(source) -> UrdfTree:
         childs.add(c.get("link"))
         lim = j.find("limit")
         if t in ("revolute", "prismatic") and lim is not None and lim.get("lower") is not None:
-            limits[name] = (float(lim.get("lower")), float(lim.get("upper", "0")))
+            limits[name] = (
+                _urdf_float(lim.get("lower"), label, f"joint '{name}' limit lower"),
+                _urdf_float(lim.get("upper", "0"), label, f"joint '{name}' limit upper"),
+            )
         o = j.find("origin")
-        xyz = (o.get("xyz") if o is not None else None) or "0 0 0"
-        origins[name] = np.array([float(v) for v in xyz.split()])
+        xyz = ((o.get("xyz") if o is not None else None) or "0 0 0").split()
+        if len(xyz) != 3:
+            raise UrdfParseError(f"{label}: joint '{name}' origin xyz needs 3 numbers, got {' '.join(xyz)!r}")
+        origins[name] = np.array([_urdf_float(v, label, f"joint '{name}' origin xyz") for v in xyz])
     roots = [ln.get("name") for ln in root.findall("link") if ln.get("name") not in childs]
     if len(roots) != 1:
         raise ModelError(f"{label}: expected one root link, found {roots}")
     return UrdfTree(roots[0], joints, children, limits, origins)
+
+
+def _urdf_float(text, label: str, what: str) -> float:
+    try:
+        return float(text)
+    except (TypeError, ValueError):
+        raise UrdfParseError(f"{label}: {what}: expected a number, got {text!r}") from None
 
 
 def beam_length(source, link: str) -> float:
@@ -304,11 +325,15 @@ def srdf_end_effector(srdf) -> str | None:
 # ----------------------------------------------------------------------------- pose
 def parse_q(items) -> dict[str, float]:
     """``["NAME=VALUE", ...]`` → {name: value} (rad or m); :class:`InputError` on bad items."""
+    if isinstance(items, (str, bytes)) or not isinstance(items, (list, tuple, type(None))):
+        raise ArgumentError(f"parse_q expects a list of 'NAME=VALUE' strings, got {type(items).__name__} {items!r}")
     out = {}
     for it in items or []:
-        if "=" not in it:
+        if not isinstance(it, str) or "=" not in it:
             raise InputError(f"--q expects NAME=VALUE, got '{it}'")
         name, val = it.split("=", 1)
+        if not name.strip():
+            raise InputError(f"--q expects NAME=VALUE, got '{it}' (no joint name)")
         try:
             v = float(val)
         except ValueError:
@@ -436,6 +461,7 @@ def build_robot(
     """
     from .generator import generate_vjm, load_spec
 
+    _check_robot_options(source, frame, q, pose_name)
     if isinstance(source, (str, Path)) and not (
         isinstance(source, str) and source in robot_names()
     ):
@@ -478,7 +504,7 @@ def build_robot(
     pose.update(user_q)
     spec_data = None
     if springs is not None:
-        spec_data = dict(springs) if isinstance(springs, dict) else _read_spec(springs)
+        spec_data = _read_spec(springs)
     if frame is None and spec_data and spec_data.get("frame"):
         frame = str(spec_data["frame"])  # the spec's end frame when --frame is not given
     if frame is None:
@@ -502,6 +528,25 @@ def build_robot(
     spec.setdefault("name", src.name)
     vm = load_vjm(generate_vjm(text, spec))
     return RobotModel(vm, src, spec, pose, used, text)
+
+
+def _check_robot_options(source, frame, q, pose_name) -> None:
+    """Types of the arguments of :func:`build_robot` (:class:`ArgumentError` naming them)."""
+    if not isinstance(source, (RobotSource, str, Path)):
+        raise ArgumentError(
+            f"source must be a robot name, a URDF path or a RobotSource, got {type(source).__name__} {source!r}"
+        )
+    for arg, value in (("frame", frame), ("pose_name", pose_name)):
+        if value is not None and not isinstance(value, str):
+            raise ArgumentError(f"{arg} must be a name (str) or None, got {type(value).__name__} {value!r}")
+    if q is not None:
+        if not isinstance(q, dict):
+            raise ArgumentError(f"q must be a dict {{joint name: value (rad or m)}}, got {type(q).__name__} {q!r}")
+        for name, v in q.items():
+            if not isinstance(name, str) or isinstance(v, bool) or not isinstance(
+                v, (int, float, np.integer, np.floating)
+            ):
+                raise ArgumentError(f"q: joint '{name}' position must be a number (rad or m), got {v!r}")
 
 
 def _wrap_into_limits(tree: UrdfTree, pose: dict) -> dict:
@@ -591,19 +636,11 @@ def _nudge_if_singular(text, tree: UrdfTree, frame: str, chain: list[str], pose:
 
 
 def _read_spec(springs) -> dict:
-    """A spring spec from a YAML path or YAML text (its 'frame' is optional here)."""
-    import yaml
+    """A validated spring spec from a dict, a YAML path or YAML text (its 'frame' is
+    optional here); see :func:`vjm_pin.spec.read_spec`."""
+    from .spec import read_spec
 
-    p = Path(springs) if not (isinstance(springs, str) and "\n" in springs) else None
-    if p is not None and not p.is_file():
-        raise SpecError(f"spring specification file not found: {springs}")
-    try:
-        data = yaml.safe_load(p.read_text() if p is not None else springs)
-    except yaml.YAMLError as e:
-        raise SpecError(f"spring specification is not valid YAML: {e}") from None
-    if not isinstance(data, dict):
-        raise SpecError("spring specification must be a mapping of keys")
-    return data
+    return read_spec(springs, require_frame=False)
 
 
 def load_robot(name_or_path, **kwargs) -> VjmModel:

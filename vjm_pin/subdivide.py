@@ -58,7 +58,8 @@ def subdivide_vjm(source: str | Path, k: int) -> str:
     if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
         raise SpecError(f"subdivide must be a positive integer, got {k!r}")
     k = int(k)
-    root, _text, label = _read_root(source)
+    root, text, label = _read_root(source)
+    load_vjm(text)  # validates the input (numbers, roles, matrices) before it is taken apart
     root = copy.deepcopy(root)
     springs = [el for el in root.findall(f"{_Q}spring") if el.find(f"{_Q}beam") is not None]
     if not springs:
