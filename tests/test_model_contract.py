@@ -231,6 +231,10 @@ def test_generators_write_only_known_tags():
     texts.append(subdivide_vjm(B, 3))
     texts.append(generate_vjm(RIGID, {"frame": "end", "links": {"link1": {"beam": TUBE, "dofs": ["rz", "x", "y"]}}}))
     texts += list(_load_orthoglide_script().orthoglide_models().values())
+    closed = importlib.util.spec_from_file_location("make_closed_models_contract", ROOT / "scripts" / "make_closed_models.py")
+    closed_mod = importlib.util.module_from_spec(closed)
+    closed.loader.exec_module(closed_mod)
+    texts += list(closed_mod.closed_models().values())
     seen = set()
     for text in texts:
         for tag, attrs in _vjm_elements(text):

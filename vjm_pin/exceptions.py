@@ -187,3 +187,19 @@ class EquilibriumCheckError(NoEquilibrium):
     def __init__(self, message: str, result=None, checks=None):
         self.checks = dict(checks or {})
         super().__init__(message, result, float(self.checks.get("statics_relative", float("nan"))))
+
+
+class ClosureViolated(ModelError):
+    """A loop closure (``<vjm:closure>``) is not satisfied at the model's reference
+    configuration: the file is not assembled.
+
+    Attributes:
+        closure: The closure name. component: The violated component (``x`` … ``rz``).
+        violation: Its value there (m or rad).
+    """
+
+    def __init__(self, message: str, closure: str, component: str, violation: float):
+        self.closure = closure
+        self.component = component
+        self.violation = violation
+        super().__init__(message)

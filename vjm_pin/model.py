@@ -28,6 +28,7 @@ import numpy as np
 
 from .exceptions import (
     ArgumentError,
+    ClosureViolated,
     FrameNotFound,
     InputError,
     JointNotFound,
@@ -114,6 +115,17 @@ VJM_TAGS: dict[str, VjmTag] = {
         ("name", "frame", "offset"),
         "Parallel robots (docs/parallel.md): one leg, the link where it meets the platform and the "
         "platform point in that link's frame (m).",
+    ),
+    "closure": VjmTag(
+        "robot",
+        ("name", "frame_a", "frame_b", "components"),
+        "A loop closure (unique `name`): the placement of `frame_a` relative to `frame_b` (the "
+        "translation of the origins and `log3` of the relative rotation, both in `frame_b`'s axes; "
+        "m, rad) is held at zero in the listed `components` (a non-empty subset of `x y z rx ry rz` "
+        "without repeats, default all six; kept in the order written, which is the order of the "
+        "constraint rows and reactions). Frames are links or URDF frames. The file is assembled at "
+        "its reference configuration: each listed component is zero there to 1e-9 (m, rad). "
+        "Redundant components (a planar loop closed in all six) are allowed.",
     ),
 }
 
@@ -267,6 +279,114 @@ class SpringGroup:
     beam: dict | None = None
 
 
+#: Largest violation (m or rad) of a closure component at the reference configuration
+#: that the loader accepts: the file must be assembled there.
+ASSEMBLY_TOLERANCE = 1e-9
+
+
+@dataclass(frozen=True)
+class Closure:
+    """One loop closure (``<vjm:closure>``): frame_a is held on frame_b.
+
+    The relative placement of ``frame_a`` with respect to ``frame_b`` is
+    ``s = (R_bᵀ(p_a − p_b), log3(R_bᵀ R_a))`` (m, rad; both parts in ``frame_b``'s axes,
+    :func:`relative_placement`); the closure holds ``s`` at zero in ``components``.
+
+    Attributes:
+        name: Unique closure name.
+        frame_a, frame_b: Pinocchio frame names (links or URDF frames), distinct.
+        components: Held components among ``x y z rx ry rz``, non-empty, no repeats, in the
+            order written in the file: the order of the constraint rows and multipliers.
+    """
+
+    name: str
+    frame_a: str
+    frame_b: str
+    components: tuple[str, ...]
+
+    def __post_init__(self):
+        comps = tuple(self.components.split() if isinstance(self.components, str) else self.components)
+        bad = [c for c in comps if c not in COMPONENTS]
+        if bad:
+            raise ModelError(f"closure '{self.name}': component '{bad[0]}' is not one of {list(COMPONENTS)}")
+        if not comps or len(set(comps)) != len(comps):
+            raise ModelError(f"closure '{self.name}': components {list(comps)} must be distinct and non-empty")
+        if self.frame_a == self.frame_b:
+            raise ModelError(f"closure '{self.name}': frame_a and frame_b are the same frame '{self.frame_a}'")
+        object.__setattr__(self, "components", comps)
+
+    @property
+    def indices(self) -> tuple[int, ...]:
+        """Indices of :attr:`components` in ``(x, y, z, rx, ry, rz)``, in the order written."""
+        return tuple(COMPONENTS.index(c) for c in self.components)
+
+
+def relative_placement(p_a, r_a, p_b, r_b) -> np.ndarray:
+    """The 6-D placement of frame a relative to frame b: ``(R_bᵀ(p_a − p_b), log3(R_bᵀ R_a))``.
+
+    Args:
+        p_a, p_b: (3,) frame origins, world (m). r_a, r_b: (3, 3) orientations in world.
+
+    Returns:
+        (6,): translation (m) and rotation vector (rad), in frame b's axes.
+    """
+    import pinocchio as pin
+
+    r_b = np.asarray(r_b, float)
+    return np.concatenate([r_b.T @ (np.asarray(p_a, float) - p_b), pin.log3(r_b.T @ np.asarray(r_a, float))])
+
+
+def _read_closures(root: ET.Element, model, label: str, reference: np.ndarray) -> tuple[Closure, ...]:
+    """The ``<vjm:closure>`` elements, validated and checked for assembly at ``reference``.
+
+    Raises:
+        ModelError: a missing attribute, a repeated name, bad components.
+        FrameNotFound: an unknown frame.
+        ClosureViolated: a listed component is not zero to :data:`ASSEMBLY_TOLERANCE` at
+            the reference configuration.
+    """
+    import pinocchio as pin
+
+    frame_names = [f.name for f in model.frames]
+    closures: list[Closure] = []
+    for el in root.findall(f"{_Q}closure"):
+        name = el.get("name")
+        if not name:
+            raise ModelError(f"{label}: <vjm:closure> without 'name'")
+        if any(c.name == name for c in closures):
+            raise ModelError(f"{label}: two <vjm:closure> elements named '{name}'")
+        frames = []
+        for attr in ("frame_a", "frame_b"):
+            f = el.get(attr)
+            if not f:
+                raise ModelError(f"{label}: closure '{name}' has no '{attr}' attribute")
+            if not model.existFrame(f):
+                raise FrameNotFound(f, frame_names, f"closure '{name}' {attr}")
+            frames.append(f)
+        comps = el.get("components")
+        comps = " ".join(COMPONENTS) if comps is None else comps
+        closures.append(Closure(name, frames[0], frames[1], tuple(comps.split())))
+    if not closures:
+        return ()
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, reference)
+    for c in closures:
+        ma, mb = data.oMf[model.getFrameId(c.frame_a)], data.oMf[model.getFrameId(c.frame_b)]
+        s = relative_placement(ma.translation, ma.rotation, mb.translation, mb.rotation)
+        for i in c.indices:
+            if not abs(s[i]) <= ASSEMBLY_TOLERANCE:
+                unit = "m" if i < 3 else "rad"
+                raise ClosureViolated(
+                    f"{label}: closure '{c.name}' is violated at the reference configuration: component "
+                    f"'{COMPONENTS[i]}' is {s[i]:.3g} {unit} (tolerance {ASSEMBLY_TOLERANCE:g}); the file must be "
+                    "assembled at its reference configuration",
+                    c.name,
+                    COMPONENTS[i],
+                    float(s[i]),
+                )
+    return tuple(closures)
+
+
 @dataclass(frozen=True)
 class VjmModel:
     """A manipulator in the VJM form, ready for the solver.
@@ -287,6 +407,9 @@ class VjmModel:
         K_theta: (nθ, nθ) block-diagonal stiffness of all springs, in ``theta_idx`` order.
         theta0: (nθ,) rest values θ0.
         urdf: The URDF text the model was read from.
+        closures: The loop closures (``<vjm:closure>``), file order; empty for a tree. The
+            file's reference configuration satisfies them (to 1e-9); one changed by
+            :meth:`with_positions` need not (the solver re-assembles the mechanism).
     """
 
     model: object
@@ -302,6 +425,7 @@ class VjmModel:
     K_theta: np.ndarray
     theta0: np.ndarray
     urdf: str = field(repr=False, default="")
+    closures: tuple[Closure, ...] = ()
 
     # ------------------------------------------------------------------ names
     @property
@@ -566,6 +690,7 @@ def load_vjm(source: str | Path) -> VjmModel:
             raise InputError(f"joint '{joint_names[i]}': position is not finite")
     if not springs:
         raise RoleError(f"{label}: the model has no spring (no <vjm:spring> and no actuated joint with a stiffness)")
+    closures = _read_closures(root, model, label, reference)
     return VjmModel(
         model=model,
         name=root.get("name", "robot"),
@@ -580,4 +705,5 @@ def load_vjm(source: str | Path) -> VjmModel:
         K_theta=np.asarray(K, dtype=float),
         theta0=np.array(theta0, dtype=float),
         urdf=text,
+        closures=closures,
     )

@@ -97,6 +97,11 @@ def resolve(name_or_path: str, *, frame=None, q=None, pose_name=None, springs=No
             "whose frame and springs are in its tags"
         )
     vm = load_vjm(vjm_path)
+    if vm.closures:  # until the mechanism solver of issue 13: the tree solver would ignore them
+        raise ModelError(
+            f"model '{name_or_path}' has loop closures ({', '.join(c.name for c in vm.closures)}); the solver "
+            "of this version handles open chains only, it would ignore them"
+        )
     if q:
         vm = vm.with_positions(q)
     return vm, None
