@@ -193,10 +193,16 @@ def test_wrench_driven_equals_displacement_driven(seed):
     assert rel(back.wrench, res.wrench) < 1e-8
 
 
-def test_wrench_driven_with_passive_joints_is_refused_with_reason():
+def test_wrench_driven_with_passive_joints_needs_no_regular_stiffness():
+    """A passive base makes K_C singular (eq. 11 was impossible); the total-potential Newton
+    solves it: the Π chain under a small pull is a stable equilibrium whose wrench is the load."""
     vm = load_vjm(paper_model_urdf("a", "pi"))
-    with pytest.raises(SingularStiffness, match="passive"):
-        EquilibriumSolver(vm).solve_wrench([-0.5, 0.0, 0, 0, 0, 0])
+    ev = np.linalg.eigvalsh(unloaded_stiffness(vm).task_stiffness)
+    assert np.abs(ev).min() < 1e-9 * np.abs(ev).max()  # K_C⁻¹ of eq. 11 does not exist
+    res = EquilibriumSolver(vm, tol=1e-12).solve_wrench([0.1, 0.0, 0, 0, 0, 0])
+    assert res.converged and res.stable and res.stable_end_held
+    assert np.allclose(res.wrench, [0.1, 0, 0, 0, 0, 0], atol=1e-15)
+    assert res.deflection[0] > 1e-3  # the chain moved along the pull
 
 
 def test_non_convergence_is_reported():
@@ -220,7 +226,7 @@ def test_fast_fail_makes_one_attempt():
     d = [-0.02, 0, 0]
     full = solver.solve(d)
     fast = solver.solve(d, fast_fail=True)
-    assert full.stable and "restart" in full.path
+    assert full.stable and ("restart" in full.path or "escape" in full.path)
     assert fast.converged and fast.stable is False and fast.path == "newton"
     assert fast.iterations < full.iterations / 10
     with pytest.raises(NoEquilibrium):

@@ -7,12 +7,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..exceptions import NoEquilibrium
 from ..kinematics import Kinematics
 from ..model import VjmModel
 from .blocks import Blocks, evaluate_blocks, full_wrench
 from .curve import CriticalPoint, Curve, CurvePoint, trace_curve
-from .equilibrium import EquilibriumResult, EquilibriumSolver, solve_equilibrium, solve_for_wrench
-from .stability import StabilityResult, check_stability, null_space, reduced_matrix
+from .equilibrium import COMPONENTS, EquilibriumResult, EquilibriumSolver, solve_equilibrium, solve_for_wrench
+from .stability import StabilityResult, check_stability, check_stability_held, null_space, reduced_matrix
 from .stiffness import (
     StiffnessResult,
     eq28_matrix,
@@ -30,7 +31,18 @@ def blocks_at(vm: VjmModel, x: np.ndarray, wrench: np.ndarray, kin: Kinematics |
 
 
 def loaded_stiffness(vm: VjmModel, eq: EquilibriumResult, method: str = "eq30", kin: Kinematics | None = None) -> StiffnessResult:
-    """Loaded Cartesian stiffness K_C (and K_q, K_θ) at the equilibrium ``eq`` (eq. 30/32/33)."""
+    """Loaded Cartesian stiffness K_C (and K_q, K_θ) at the equilibrium ``eq`` (eq. 30/32/33).
+
+    Raises:
+        NoEquilibrium: ``eq`` did not converge (its stiffness would be that of no equilibrium).
+        SingularStiffness: the matrix to invert is singular (the message says why)."""
+    if not getattr(eq, "converged", True):
+        raise NoEquilibrium(
+            "loaded stiffness of an equilibrium that did not converge: it describes no equilibrium "
+            f"(path {eq.path!r}, residuals {eq.residuals})",
+            eq,
+            eq.residual(),
+        )
     return stiffness_from_blocks(blocks_at(vm, eq.x, eq.wrench, kin), vm.task, method)
 
 
@@ -41,6 +53,7 @@ def unloaded_stiffness(vm: VjmModel, method: str = "eq30", kin: Kinematics | Non
 
 __all__ = [
     "Blocks",
+    "COMPONENTS",
     "CriticalPoint",
     "Curve",
     "CurvePoint",
@@ -50,6 +63,7 @@ __all__ = [
     "StiffnessResult",
     "blocks_at",
     "check_stability",
+    "check_stability_held",
     "eq28_matrix",
     "evaluate_blocks",
     "full_wrench",
