@@ -6,7 +6,10 @@ URDF, loaded equilibrium, its stability, the loaded Cartesian stiffness and
 force–deflection curves with buckling.
 """
 
+from typing import TYPE_CHECKING
+
 from .exceptions import (
+    EquilibriumCheckError,
     FrameNotFound,
     InputError,
     JointNotFound,
@@ -19,23 +22,63 @@ from .exceptions import (
     UrdfParseError,
     VjmError,
 )
-from .generator import generate_vjm, load_spec
-from .model import SpringGroup, VjmModel, load_vjm
-from .solver import (
-    EquilibriumResult,
-    EquilibriumSolver,
-    StabilityResult,
-    StiffnessResult,
-    check_stability,
-    loaded_stiffness,
-    solve_equilibrium,
-    solve_for_wrench,
-    unloaded_stiffness,
-)
+
+# The names below load Pinocchio and SciPy (seconds): they are imported on first use
+# (PEP 562 ``__getattr__``), so ``import vjm_pin.cli`` is quick and the ``vjm-pin`` command
+# handles a Ctrl-C during those imports (no traceback). Add a new export to both lists.
+if TYPE_CHECKING:
+    from .generator import generate_vjm, load_spec
+    from .model import SpringGroup, VjmModel, load_vjm
+    from .solver import (
+        EquilibriumResult,
+        EquilibriumSolver,
+        StabilityResult,
+        StiffnessResult,
+        check_stability,
+        check_stability_held,
+        loaded_stiffness,
+        solve_equilibrium,
+        solve_for_wrench,
+        unloaded_stiffness,
+    )
+
+_LAZY = {
+    ".generator": ("generate_vjm", "load_spec"),
+    ".model": ("SpringGroup", "VjmModel", "load_vjm"),
+    ".solver": (
+        "EquilibriumResult",
+        "EquilibriumSolver",
+        "StabilityResult",
+        "StiffnessResult",
+        "check_stability",
+        "check_stability_held",
+        "loaded_stiffness",
+        "solve_equilibrium",
+        "solve_for_wrench",
+        "unloaded_stiffness",
+    ),
+}
+_LAZY_NAMES = {name: module for module, names in _LAZY.items() for name in names}
+
+
+def __getattr__(name: str):
+    module = _LAZY_NAMES.get(name)
+    if module is None:
+        raise AttributeError(f"module 'vjm_pin' has no attribute '{name}'")
+    import importlib
+
+    value = getattr(importlib.import_module(module, __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY_NAMES))
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "EquilibriumCheckError",
     "EquilibriumResult",
     "EquilibriumSolver",
     "FrameNotFound",
@@ -54,6 +97,7 @@ __all__ = [
     "VjmError",
     "VjmModel",
     "check_stability",
+    "check_stability_held",
     "generate_vjm",
     "load_spec",
     "load_vjm",

@@ -134,16 +134,31 @@ def plot_curve(
 
 
 def save_curve_plot(curve, path, *, title: str | None = None, **kwargs) -> None:
-    """Plot ``curve`` (see :func:`plot_curve`) and write a PNG to ``path``."""
+    """Plot ``curve`` (see :func:`plot_curve`) and write it to ``path``.
+
+    The format follows the extension (:data:`vjm_pin.outputs.PLOT_EXTENSIONS`: PNG, PDF,
+    SVG, ...). The path is checked first (:func:`vjm_pin.outputs.check_output`) and the file
+    written atomically: an existing file is replaced only by a complete plot.
+
+    Raises:
+        OutputError: the path cannot be written (unknown extension, missing or read-only
+            folder).
+    """
+    from .outputs import PLOT_EXTENSIONS, atomic_output, check_output
+
+    path = check_output(path, PLOT_EXTENSIONS, what="plot")
     import matplotlib
 
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6.4, 4.4))
-    plot_curve(curve, ax, **kwargs)
-    if title:
-        ax.set_title(title, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    try:
+        plot_curve(curve, ax, **kwargs)
+        if title:
+            ax.set_title(title, fontsize=10)
+        fig.tight_layout()
+        with atomic_output(path) as tmp:
+            fig.savefig(tmp, dpi=120, format=path.suffix[1:].lower())
+    finally:
+        plt.close(fig)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .common import MAX_SUBDIVIDE, int_range
+
 
 def add_robot_options(p) -> None:
     """Options shared by the commands that accept a robot or a plain URDF (analyze, map)."""
@@ -39,9 +41,10 @@ def add_parser(sub):
         "analyze",
         help="equilibrium, stability and loaded stiffness for a deflection or a wrench",
         description=(
-            "Solve the loaded equilibrium of MODEL (eq. 5) for a prescribed end deflection, or for a "
-            "wrench (eq. 11), check its stability (eq. 23) and compute the loaded Cartesian stiffness "
-            "(eq. 30). Deflection: from the unloaded end location, world axes, m and rad (rotation "
+            "Solve the loaded equilibrium of MODEL (eq. 5) for a prescribed end deflection (every task "
+            "component held), or for a dead wrench (every task component loaded; Newton on the total "
+            "potential), check it and report two stability verdicts: 'stable' for the control as run "
+            "and 'stable_end_held' (eq. 23), and the loaded Cartesian stiffness (eq. 30). Deflection: from the unloaded end location, world axes, m and rad (rotation "
             "vector). Wrench: force at the end frame origin and moment, world axes, N and N·m. "
             "Without --deflection/--wrench the end wrench is zero. --payload and --gravity add dead "
             "loads (eq. 5' and 28' of vjm_pin.loads)."
@@ -75,28 +78,43 @@ def add_parser(sub):
     )
     p.add_argument(
         "--subdivide",
-        type=int,
+        type=int_range(1, MAX_SUBDIVIDE),
         default=1,
         metavar="K",
-        help="split every beam link into K sub-links (models whose springs keep <vjm:beam>)",
+        help="split every beam link into K sub-links (models whose springs keep <vjm:beam>; "
+        f"K from 1 to {MAX_SUBDIVIDE})",
     )
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
     p.set_defaults(func=run)
 
 
-def weakest_direction(k6: np.ndarray, task) -> dict | None:
-    """Lowest translational stiffness: the smallest eigenvalue (N/m) of the symmetric part of
-    the translational block of K_C (task rows x, y, z only) and its unit direction (world)."""
-    t = [i for i in task if i < 3]
-    if not t or k6 is None:
+def weakest_direction(k6: np.ndarray, task, lost=()) -> dict | None:
+    """Weakest translational stiffness with the end free in all other task components (free to
+    rotate): :func:`vjm_pin.indices.weakest_translation` on the task block of K_C, as a JSON
+    mapping (stiffness N/m, unit direction in world axes, its definition, the free and lost
+    directions). None without K_C or without a translational task component.
+
+    Args:
+        k6: (6, 6) K_C (zero rows outside the task) or None. task: task component indices.
+        lost: Names of the directions a singular pose loses (:func:`vjm_pin.indices.lost_directions`).
+    """
+    from ..indices import weakest_translation
+
+    t = list(task)
+    if k6 is None or not any(c < 3 for c in t):
         return None
-    blk = np.asarray(k6)[np.ix_(t, t)]
-    ev, vec = np.linalg.eigh(0.5 * (blk + blk.T))
-    d = np.zeros(3)
-    d[t] = vec[:, 0]
-    if d[np.argmax(np.abs(d))] < 0:
-        d = -d
-    return {"stiffness": float(ev[0]), "direction": d}
+    return weakest_translation(np.asarray(k6, float)[np.ix_(t, t)], t, lost).to_dict()
+
+
+def control_dict(vm, held) -> dict:
+    """``{"held": [...], "loaded": [...]}``: task component names held (deflection prescribed)
+    and loaded (dead wrench prescribed); ``held=None`` holds every task component."""
+    names = ("x", "y", "z", "rx", "ry", "rz")
+    held = list(vm.task) if held is None else list(held)
+    return {
+        "held": [names[c] for c in vm.task if c in held],
+        "loaded": [names[c] for c in vm.task if c not in held],
+    }
 
 
 def analysis_dict(vm, res, method="eq30") -> dict:
@@ -113,8 +131,15 @@ def analysis_dict(vm, res, method="eq30") -> dict:
         "path": res.path,
         "wrench": res.wrench,
         "deflection": res.deflection,
+        "control": control_dict(vm, res.held),
         "stable": res.stable,
+        "stable_end_held": res.stable_end_held,
         "stability_eigenvalues": None if res.stability is None else res.stability.eigenvalues,
+        "stability_end_held_eigenvalues": None
+        if res.stability_end_held is None
+        else res.stability_end_held.eigenvalues,
+        "warnings": list(res.warnings),
+        "checks": dict(res.checks),
         "residual": res.residuals,
         "energy": res.energy,
         "q": dict(zip(vm.q_names, res.q)),
@@ -132,10 +157,17 @@ def analysis_dict(vm, res, method="eq30") -> dict:
     return out
 
 
-def loaded_dict(vm, eq, method="eq30", gravity=False) -> dict:
-    """The JSON object of ``analyze`` for a :class:`~vjm_pin.loads.LoadedEquilibrium`."""
+def loaded_dict(vm, eq, method="eq30", gravity=False, loads=None) -> dict:
+    """The JSON object of ``analyze`` for a :class:`~vjm_pin.loads.LoadedEquilibrium`
+    (every task component loaded: ``stable`` is ``K − H − H^G`` positive definite,
+    ``stable_end_held`` eq. 23)."""
     from ..exceptions import SingularStiffness
+    from ..loads import LinkLoads, loaded_blocks
     from ..solver import unloaded_stiffness
+    from ..solver.stability import check_stability_held
+
+    b = loaded_blocks(vm, eq.x, eq.wrench, loads if loads is not None else LinkLoads(np.zeros(3)))
+    free = check_stability_held(b, np.zeros((0, len(vm.task))))
 
     out = {
         "model": vm.name,
@@ -146,8 +178,12 @@ def loaded_dict(vm, eq, method="eq30", gravity=False) -> dict:
         "path": "newton(eq. 5')" + ("+gravity" if gravity else ""),
         "wrench": eq.wrench,
         "deflection": eq.deflection,
-        "stable": eq.stable,
-        "stability_eigenvalues": eq.stability.eigenvalues,
+        "control": control_dict(vm, ()),
+        "stable": free.stable,
+        "stable_end_held": eq.stable,
+        "stability_eigenvalues": free.eigenvalues,
+        "stability_end_held_eigenvalues": eq.stability.eigenvalues,
+        "warnings": [] if free.stable else ["unstable under the prescribed loads (the end is free under them)"],
         "residual": {"statics": eq.residual},
         "theta": dict(zip(vm.theta_names, eq.theta)),
         "gravity": gravity,
@@ -198,22 +234,29 @@ def run(args) -> int:
     extra = args.payload is not None or args.gravity
     if extra and args.deflection is not None:
         raise InputError("--payload/--gravity take a --wrench (or none), not a --deflection")
-    if args.deflection is not None:
-        res = EquilibriumSolver(vm).solve(finite_vector(args.deflection, "--deflection"))
+    if args.deflection is not None or (args.wrench is None and not extra):
+        # every task component held (no load at all: the end held at its unloaded location)
+        solver = EquilibriumSolver(vm)
+        d = np.zeros(6) if args.deflection is None else finite_vector(args.deflection, "--deflection")
+        res = solver.verify(solver.solve(d), method=args.method)
         out = analysis_dict(vm, res, args.method)
     else:
         w = np.zeros(6) if args.wrench is None else finite_vector(args.wrench, "--wrench")
         if args.payload is not None:
             w = w + payload_wrench(args.payload)
-        if extra or vm.n_q == 0:  # springs and motors only: Newton on eq. (5') directly
-            eq = solve_loaded(
-                vm, w, LinkLoads.earth() if args.gravity else None, method=args.method
-            )
-            out = loaded_dict(vm, eq, args.method, args.gravity)
-        else:
-            res = EquilibriumSolver(vm).solve_wrench(w)
+        if extra:  # link loads: Newton on eq. (5') (springs and motors only, vjm_pin.loads)
+            loads = LinkLoads.earth() if args.gravity else None
+            eq = solve_loaded(vm, w, loads, method=args.method)
+            out = loaded_dict(vm, eq, args.method, args.gravity, loads)
+        else:  # every task component loaded: Newton on the total potential
+            solver = EquilibriumSolver(vm)
+            res = solver.verify(solver.solve_wrench(w), method=args.method)
             out = analysis_dict(vm, res, args.method)
-    out["weakest"] = weakest_direction(out["stiffness"], vm.task)
+    from ..indices import lost_directions, name_direction
+    from ..model import COMPONENTS
+
+    lost = [name_direction(v, COMPONENTS) for v in lost_directions(vm)]
+    out["weakest"] = weakest_direction(out["stiffness"], vm.task, lost)
     out["payload_kg"] = args.payload
     if robot is not None:
         out["pose"] = robot.pose
@@ -246,15 +289,29 @@ def _human(vm, robot, out, fmt_matrix) -> str:
         f"deflection: translation {np.array2string(d[:3] * 1e3, precision=4)} mm (|d| = {np.linalg.norm(d[:3]) * 1e3:.4g} mm), "
         f"rotation {np.array2string(d[3:] * 1e3, precision=4)} mrad (|r| = {np.linalg.norm(d[3:]) * 1e3:.4g} mrad)"
     )
+    ctl = out.get("control")
+    if ctl is not None:
+        lines.append(
+            f"control: held {' '.join(ctl['held']) or '(none)'}; loaded {' '.join(ctl['loaded']) or '(none)'}"
+        )
     if out.get("stable") is not None:
         verdict = "stable" if out["stable"] else "UNSTABLE"
         ev = out.get("stability_eigenvalues")
         extra = (
-            f"; eigenvalues of the reduced matrix {np.array2string(np.asarray(ev), precision=4)}"
+            f"; eigenvalues {np.array2string(np.asarray(ev), precision=4)}"
             if ev is not None and len(ev)
             else ""
         )
-        lines.append(f"stability (eq. 23): {verdict}{extra}")
+        what = "stable (as controlled)" if ctl is not None and ctl["loaded"] else "stable (eq. 23, end held)"
+        lines.append(f"{what}: {verdict}{extra}")
+    if out.get("stable_end_held") is not None and ctl is not None and ctl["loaded"]:
+        ev = out.get("stability_end_held_eigenvalues")
+        extra = f"; eigenvalues {np.array2string(np.asarray(ev), precision=4)}" if ev is not None and len(ev) else ""
+        lines.append(
+            f"stable_end_held (eq. 23): {'stable' if out['stable_end_held'] else 'UNSTABLE'}{extra}"
+        )
+    for note in out.get("warnings") or ():
+        lines.append(f"warning: {note}")
     for key, label in (
         ("stiffness", "loaded stiffness K_C"),
         ("stiffness_unloaded", "unloaded stiffness"),
@@ -267,6 +324,17 @@ def _human(vm, robot, out, fmt_matrix) -> str:
     wk = out.get("weakest")
     if wk is not None:
         lines.append(
-            f"lowest translational stiffness: {wk['stiffness'] / 1e3:.4g} N/mm along {np.array2string(wk['direction'], precision=3, suppress_small=True)} (world)"
+            f"weakest translational stiffness (end free to rotate): {wk['stiffness'] / 1e3:.4g} N/mm along "
+            f"{np.array2string(np.asarray(wk['direction']), precision=3, suppress_small=True)} (world); "
+            f"with the rotations held: {wk['stiffness_rotations_held'] / 1e3:.4g} N/mm"
         )
+        if wk["free_directions"]:
+            lines.append(
+                f"warning: K_C is singular: the end moves without a force change along {'; '.join(wk['free_directions'])}"
+            )
+        if wk["lost_directions"]:
+            lines.append(
+                f"warning: singular pose: the joints cannot move the end along {'; '.join(wk['lost_directions'])} "
+                "(to first order); K_C carries no stiffness for it (a zero row there is not a zero stiffness)"
+            )
     return "\n".join(lines)

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
 MODEL = "paper-c-s"
@@ -25,17 +23,25 @@ def add_parser(sub):
         ),
     )
     p.add_argument(
-        "--out", default="vjm-demo", metavar="DIR", help="output directory (default ./vjm-demo)"
+        "--out",
+        default="vjm-demo",
+        metavar="DIR",
+        help="output folder, created if missing (default ./vjm-demo); its curve.png and curve.html "
+        "are checked before the work starts, written atomically, and replaced if they exist",
     )
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
+    from ..outputs import HTML_EXTENSIONS, PLOT_EXTENSIONS, check_output, check_output_dir
     from ..registry import resolve_model
     from .view import curve_page, trace
 
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = check_output_dir(args.out, what="--out")  # before any work
+    png, html = out / "curve.png", out / "curve.html"
+    if out.is_dir():
+        check_output(png, PLOT_EXTENSIONS, what="--out")
+        check_output(html, HTML_EXTENSIONS, what="--out")
     vm = resolve_model(MODEL)
     direction = np.array([*DIRECTION, 0.0, 0.0, 0.0])
     print(
@@ -52,7 +58,7 @@ def run(args) -> int:
             )
     else:
         print("no critical point on this path")
-    png = out / "curve.png"
+    out.mkdir(parents=True, exist_ok=True)
     try:
         from ..plots import save_curve_plot
     except ModuleNotFoundError as e:
@@ -69,7 +75,6 @@ def run(args) -> int:
             force_label="compressive force [N]",
         )
         print(f"plot:      {png.resolve()}")
-    html = out / "curve.html"
     page = curve_page(
         vm,
         curve,

@@ -80,7 +80,7 @@ def run_analyze(args) -> int:
         eq = rs.solve(finite_vector(args.deflection, "--deflection"))
     else:
         w = np.zeros(6) if args.wrench is None else finite_vector(args.wrench, "--wrench")
-        eq = rs.solve_wrench(w) if np.any(w) else rs.solve(np.zeros(6))
+        eq = _solve_wrench_or_buckling(rs, w) if np.any(w) else rs.solve(np.zeros(6))
     k = rs.stiffness(eq, args.method)
     k0 = rs.stiffness(None, args.method)
     out = {
@@ -157,12 +157,12 @@ def run_curve(args) -> int:
     stops early (no equilibrium found) says so, with the reason (``stopped`` in --json)."""
     from ..exceptions import InputError
     from ..parallel import RobotSolver, load_parallel, trace_robot_force_curve
-    from .common import dump_json, finite_vector
+    from .common import direction_vector, dump_json
     from .curve import trace_and_plot
 
     _reject(args, {"all_branches": ("--all-branches", False), "subdivide": ("--subdivide", 1)})
     pm = load_parallel(model_path(args.model))
-    d = finite_vector(args.direction, "--direction")
+    d = direction_vector(args.direction, "--direction")
     if not np.isfinite(args.max_deflection):
         raise InputError(f"--max-deflection must be finite, got {args.max_deflection}")
     curve = trace_and_plot(
@@ -201,3 +201,63 @@ def run_curve(args) -> int:
     if args.plot:
         print(f"plot written to {args.plot}")
     return 0
+
+
+def _solve_wrench_or_buckling(rs, w, max_outer: int = 30, tol: float = 1e-9):
+    """Platform wrench ``w`` (6,): the outer iteration of eq. (11) with one Newton attempt per
+    leg at each trial pose (no restarts: a leg past its critical load fails fast or comes back
+    unstable instead of searching for minutes). An unstable leg (eq. 23) or a loaded stiffness
+    that is not positive definite means the wrench exceeds the critical force: raised as
+    :class:`~vjm_pin.exceptions.NoEquilibrium` whose message starts with "buckling"."""
+    from ..exceptions import NoEquilibrium
+    from ..kinematics import displace
+
+    task = list(rs.task)
+    res = rs.solve(np.zeros(6))
+    scale = max(float(np.abs(w).max()), 1e-300)
+    err = (w - res.wrench)[task]
+    for _ in range(max_outer):
+        if np.abs(err).max() <= tol * scale:
+            break
+        k = rs.stiffness(res)[np.ix_(task, task)]
+        ev = np.linalg.eigvalsh(0.5 * (k + k.T))
+        if ev.min() <= 1e-9 * np.abs(ev).max():
+            break
+        dt_task = np.linalg.solve(k, err)
+        new = None
+        for step in 0.5 ** np.arange(6):
+            dt = np.zeros(6)
+            dt[task] = step * dt_task
+            try:
+                cand = rs.solve(target=displace(res.position, res.rotation, dt), x0=res, fast_fail=True)
+            except NoEquilibrium:
+                continue
+            if np.abs((w - cand.wrench)[task]).max() < np.abs(err).max():
+                new = cand
+                break
+        if new is None:
+            break
+        res = new
+        err = (w - res.wrench)[task]
+        if not res.stable:
+            break
+    done = np.abs(err).max() <= tol * scale
+    k = rs.stiffness(res)[np.ix_(task, task)] if res.converged else None
+    k_ok = k is not None and np.linalg.eigvalsh(0.5 * (k + k.T)).min() > 0
+    if done and res.stable and k_ok:
+        return res
+    f = np.linalg.norm(w[:3])
+    if not res.stable:
+        why = f"legs {', '.join(res.unstable_legs)} lose stability (eq. 23)"
+    elif not k_ok and k is not None:
+        why = "the loaded platform stiffness is not positive definite"
+    else:
+        why = f"no stable equilibrium reached (wrench error {np.abs(err).max():.3g} N)"
+    raise NoEquilibrium(
+        f"buckling: under the wrench {np.round(w, 3).tolist()} (|F| = {f / 1e3:.4g} kN) {why}: the load "
+        "exceeds the critical force of the platform along this direction (see 'vjm-pin curve' for the "
+        "critical point)",
+        None,
+        float(np.abs(err).max()),
+    )
+
