@@ -28,7 +28,7 @@ def add_parser(sub):
         "--grid",
         nargs="+",
         metavar="NAME=LO:HI:N",
-        help="grid over joints (rad, m); others at the pose",
+        help="grid over joints (rad, m; LO ≤ HI, within the URDF limits); others at the pose",
     )
     p.add_argument(
         "--wrench",
@@ -53,47 +53,74 @@ def add_parser(sub):
         "--scheduler",
         default=None,
         metavar="ADDRESS",
-        help="Dask scheduler address (tcp://host:8786)",
+        help="Dask scheduler address tcp://HOST:PORT (checked before the work, 3 s to answer)",
     )
     p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
     p.add_argument(
-        "--out", default=None, metavar="FILE", help="write the map to FILE.csv or FILE.npz"
+        "--out",
+        default=None,
+        metavar="FILE",
+        help="write the map to FILE.csv or FILE.npz; on Ctrl-C (exit status 130) the poses "
+        "finished so far are written to it and to --plot; checked before the work starts, "
+        "written atomically; an existing file is replaced",
     )
     p.add_argument(
         "--plot",
         default=None,
         metavar="FILE",
-        help="scatter plot of the deflection (PNG, PDF, SVG)",
+        help="scatter plot of the deflection (PNG, PDF, SVG); checked before the work starts, "
+        "written atomically; an existing file is replaced",
     )
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--no-progress", action="store_true", help="no progress bar (shown only on a terminal)"
+    )
     p.add_argument("--json", action="store_true", help="summary as one JSON object")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
+    import os
     import sys
 
-    from ..exceptions import InputError
+    from ..exceptions import InputError, MapInterrupted
     from ..loads import STANDARD_GRAVITY, payload_wrench
-    from ..maps import grid_poses, parse_grid, run_map, sample_poses
+    from ..map_backends import check_scheduler
+    from ..maps import MAX_WORKERS_PER_CORE, grid_poses, parse_grid, run_map, sample_poses
+    from ..outputs import PLOT_EXTENSIONS
     from .analyze import load_from_args
-    from .common import dump_json, finite_vector
+    from .common import check_output_option, dump_json, finite_vector
 
+    check_output_option(args, "--out", (".csv", ".npz"))  # output paths before any work
+    check_output_option(args, "--plot", PLOT_EXTENSIONS)
     vm, _ = load_from_args(args)
     w = finite_vector(args.wrench, "--wrench")
     if args.payload is not None:
         w = w + payload_wrench(args.payload)
+        if not np.all(np.isfinite(w)):
+            raise InputError(f"--payload {args.payload:g} kg: its weight is not a finite force")
     if args.samples is not None:
         names, poses = sample_poses(vm, args.samples, args.seed)
     else:
         names, poses = grid_poses(vm, parse_grid(args.grid))
     if args.workers is not None and args.workers < 1:
         raise InputError(f"--workers must be positive, got {args.workers}")
-    backend = args.backend or ("dask" if args.scheduler else "local")
-    if args.scheduler and backend != "dask":
-        raise InputError("--scheduler needs the dask backend")
+    cores = os.cpu_count() or 1
+    if (
+        args.workers is not None
+        and args.workers > MAX_WORKERS_PER_CORE * cores
+        and not args.scheduler
+    ):
+        raise InputError(
+            f"--workers {args.workers}: more than {MAX_WORKERS_PER_CORE} processes per core "
+            f"({cores} cores) would make the map slower, not faster"
+        )
+    backend = args.backend or ("dask" if args.scheduler is not None else "local")
+    if args.scheduler is not None:
+        if backend != "dask":
+            raise InputError("--scheduler needs the dask backend")
+        _scheduler_option(check_scheduler, args.scheduler)
     bar = None
-    if not args.no_progress and not args.json:
+    if not args.no_progress and not args.json and sys.stderr.isatty():  # no bars in log files
         from tqdm import tqdm
 
         bar = tqdm(total=poses.shape[0], unit="pose", file=sys.stderr, desc=f"map {vm.name}")
@@ -103,7 +130,8 @@ def run(args) -> int:
             bar.update(done - bar.n)
 
     try:
-        res = run_map(
+        res = _scheduler_option(
+            run_map,
             vm,
             names,
             poses,
@@ -114,13 +142,23 @@ def run(args) -> int:
             scheduler=args.scheduler,
             progress=progress,
         )
+    except MapInterrupted as e:
+        if bar is not None:
+            bar.close()
+        return _interrupted(args, e)
     finally:
         if bar is not None:
             bar.close()
-    if args.out:
-        res.save(args.out)
-    if args.plot:
-        res.plot(args.plot)
+    try:
+        if args.out:
+            res.save(args.out)
+        if args.plot:
+            res.plot(args.plot)
+    except KeyboardInterrupt:
+        print(
+            "vjm-pin: interrupted while writing the output; no half file was left", file=sys.stderr
+        )
+        return 130
     ok = res.ok
     d_mm = np.linalg.norm(res.deflection[ok, :3], axis=1) * 1e3
     summary = {
@@ -151,7 +189,7 @@ def run(args) -> int:
     for key, label, scale, unit in (
         ("deflection_mm", "deflection", 1.0, "mm"),
         ("k_along_N_per_m", "stiffness along the force", 1e-3, "N/mm"),
-        ("k_min_N_per_m", "lowest translational stiffness", 1e-3, "N/mm"),
+        ("k_min_N_per_m", "weakest translational stiffness (end free to rotate)", 1e-3, "N/mm"),
     ):
         s = summary[key]
         if s is not None:
@@ -170,3 +208,43 @@ def _stats(a):
     if a.size == 0:
         return None
     return {"min": float(a.min()), "median": float(np.median(a)), "max": float(a.max())}
+
+
+def _scheduler_option(fn, *args, **kwargs):
+    """``fn(*args, **kwargs)`` with a :class:`SchedulerError` worded for ``--scheduler``."""
+    from ..exceptions import SchedulerError
+
+    try:
+        return fn(*args, **kwargs)
+    except SchedulerError as e:
+        raise SchedulerError(e.address, e.reason, name="--scheduler") from None
+
+
+def _interrupted(args, e) -> int:
+    """Ctrl-C during the map: write the finished poses to the requested files (atomically;
+    a second Ctrl-C leaves no half file), say so in one line, exit status 130."""
+    import sys
+
+    res, n, total = e.result, int(e.result.poses.shape[0]), e.requested
+    targets = [t for t in (args.out, args.plot) if t]
+    written = []
+    try:
+        if n and args.out:
+            res.save(args.out)
+            written.append(args.out)
+        if n and args.plot:
+            res.plot(args.plot)
+            written.append(args.plot)
+    except KeyboardInterrupt:
+        pass
+    if written:
+        msg = f"interrupted: wrote {n} of {total} poses to {' and '.join(written)}"
+        missed = [t for t in targets if t not in written]
+        if missed:
+            msg += f"; {' and '.join(missed)} not written (interrupted again)"
+    elif targets:
+        msg = f"interrupted after {n} of {total} poses; nothing written"
+    else:
+        msg = f"interrupted after {n} of {total} poses"
+    print(f"vjm-pin: {msg}", file=sys.stderr)
+    return 130
