@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import sys
+from pathlib import Path
+
+from .common import MAX_SUBDIVIDE, OUTPUT_NOTE, int_range, positive_float
 
 
 def add_parser(sub):
@@ -10,12 +13,15 @@ def add_parser(sub):
         "curve",
         help="force–deflection curve along a direction, with buckling detection",
         description=(
-            "Trace the loaded equilibrium of MODEL (eq. 5) while its end moves step by step along "
-            "DIRECTION up to --max-deflection (continuation; perturbed restarts follow the stable "
-            "branch), check the stability of every point (eq. 23), and locate the critical points "
-            "(loss of stability, jump to another branch, or a sharp drop of the tangent stiffness) "
-            "to a relative force tolerance of 1e-4. Units: m and N (rad and N·m for a rotation). "
-            "The force is the external force along the direction that holds the end there."
+            "Trace the loaded equilibrium of MODEL (eq. 5) while its end moves along DIRECTION up "
+            "to --max-deflection (predictor-corrector continuation in adaptive sub-steps; the stable "
+            "branch is followed, switching to the stable buckled branch at a bifurcation), and locate "
+            "the critical points: where the followed equilibrium stops being stable under a dead force "
+            "along DIRECTION (bifurcation or force maximum; or a sharp near-loss, 'imperfect'), found "
+            "by root finding on that stability margin, independently of --steps. Every point reports "
+            "'stable' (the end held, eq. 23) and the force-control margin. Units: m and N (rad and "
+            "N·m for a rotation). The force is the external force along the direction that holds "
+            "the end there."
         ),
     )
     p.add_argument(
@@ -31,21 +37,24 @@ def add_parser(sub):
     )
     p.add_argument(
         "--max-deflection",
-        type=float,
+        type=positive_float,
         required=True,
         metavar="D",
         help="final deflection (m or rad)",
     )
-    p.add_argument("--steps", type=int, default=100, help="number of steps (default 100)")
+    p.add_argument(
+        "--steps", type=int_range(1), default=100, help="number of steps (default 100)"
+    )
     p.add_argument(
         "--all-branches", action="store_true", help="also trace the unstable branches (Fig. 4)"
     )
     p.add_argument(
         "--subdivide",
-        type=int,
+        type=int_range(1, MAX_SUBDIVIDE),
         default=1,
         metavar="K",
-        help="split every beam link into K sub-links (models whose springs keep <vjm:beam>)",
+        help="split every beam link into K sub-links (models whose springs keep <vjm:beam>; "
+        f"K from 1 to {MAX_SUBDIVIDE})",
     )
     p.add_argument(
         "--held",
@@ -54,12 +63,17 @@ def add_parser(sub):
         "DIRECTION) instead of leaving the platform free across it (no load there)",
     )
     p.add_argument(
-        "--refine-tol", type=float, default=1e-4, help="relative force tolerance of critical points"
+        "--refine-tol", type=positive_float, default=1e-4, help="relative force tolerance of critical points"
     )
     p.add_argument(
         "--json", action="store_true", help="one JSON object {points, critical, branches} on stdout"
     )
-    p.add_argument("--plot", metavar="OUT.png", help="write a force–deflection plot (PNG)")
+    p.add_argument(
+        "--plot",
+        metavar="OUT.png",
+        help="write a force–deflection plot; format from the extension (.png, .pdf, .svg, ...); "
+        f"{OUTPUT_NOTE}",
+    )
     p.add_argument(
         "--matrices",
         action="store_true",
@@ -81,6 +95,12 @@ def load_model(name: str, subdivide: int = 1):
     from ..subdivide import subdivide_model
 
     src = bundled_models().get(name, name)
+    if not Path(src).is_file():
+        resolve_model(name)  # the error of an unknown name, else:
+        raise InputError(
+            f"--subdivide applies to VJM models with beam springs (a URDF file or a bundled "
+            f"model), not to the robot '{name}'"
+        )
     return subdivide_model(src, subdivide)
 
 
@@ -90,6 +110,8 @@ def point_dict(p) -> dict:
         "force": p.force,
         "wrench": p.wrench,
         "stable": p.stable,
+        "stable_end_held": p.stable_end_held,
+        "force_control_margin": p.force_control_margin,
         "stiffness": p.stiffness,
     }
 
@@ -102,6 +124,7 @@ def critical_dict(c) -> dict:
         "stiffness_after": c.stiffness_after,
         "index": c.index,
         "force_after": c.force_after,
+        "kind": c.kind,
     }
 
 
@@ -158,7 +181,7 @@ def trace_and_plot(trace, args, name: str):
     finally:
         if bar is not None:
             bar.close()
-    if args.plot:
+    if args.plot is not None:
         from ..plots import save_curve_plot
 
         save_curve_plot(
@@ -173,10 +196,12 @@ def run(args) -> int:
     import numpy as np
 
     from ..exceptions import InputError
+    from ..outputs import PLOT_EXTENSIONS
     from ..solver import trace_curve
-    from .common import dump_json, finite_vector
+    from .common import check_output_option, direction_vector, dump_json
     from .parallel_cmds import is_parallel_model, run_curve
 
+    check_output_option(args, "--plot", PLOT_EXTENSIONS)  # before any work
     if is_parallel_model(
         args.model
     ):  # parallel robots (<vjm:leg> tags): vjm_pin/cli/parallel_cmds.py
@@ -184,7 +209,7 @@ def run(args) -> int:
     if getattr(args, "held", False):
         raise InputError("--held applies to parallel models (<vjm:leg> tags) only")
     vm = load_model(args.model, args.subdivide)
-    d = finite_vector(args.direction, "--direction")
+    d = direction_vector(args.direction, "--direction")
     if not np.isfinite(args.max_deflection):
         raise InputError(f"--max-deflection must be finite, got {args.max_deflection}")
     curve = trace_and_plot(
@@ -209,17 +234,23 @@ def run(args) -> int:
         f"model {vm.name}: direction {np.round(curve.direction, 4).tolist()}, {len(curve.points)} points"
     )
     print(
-        f"{'deflection [' + du + ']':>18} {'force [' + fu + ']':>16} {'stiffness [' + fu + '/' + du + ']':>20}  stable"
+        f"{'deflection [' + du + ']':>18} {'force [' + fu + ']':>16} {'stiffness [' + fu + '/' + du + ']':>20}"
+        f"  stable  {'force-control margin':>20}"
     )
     for p in curve.points:
         print(
-            f"{p.deflection:18.8g} {p.force:16.8g} {p.stiffness:20.8g}  {'yes' if p.stable else 'NO'}"
+            f"{p.deflection:18.8g} {p.force:16.8g} {p.stiffness:20.8g}  {'yes' if p.stable else 'NO':>6}"
+            f"  {p.force_control_margin:20.6g}"
         )
+    print(
+        "stable: the end held (eq. 23), the control as run; force-control margin > 0: also stable under "
+        "a dead force along the direction"
+    )
     if not curve.critical:
-        print("no critical point (no loss of stability, no sharp stiffness drop) in this range")
+        print("no critical point (the followed branch stays stable under a force along the direction) in this range")
     for c in curve.critical:
         print(
-            f"critical point: force {c.force:.8g} {fu} at deflection {c.deflection:.8g} {du}; "
+            f"critical point: force {c.force:.8g} {fu} at deflection {c.deflection:.8g} {du} ({c.kind}); "
             f"tangent stiffness {c.stiffness_before:.6g} -> {c.stiffness_after:.6g} {fu}/{du}"
         )
     if args.matrices:

@@ -1,33 +1,67 @@
-"""Force–deflection curves and buckling detection (paper §6.1, Fig. 4–6).
+"""Force–deflection curves and critical points (paper §6.1, Fig. 4–6).
 
-The end of the chain is moved step by step along a fixed direction ``d`` (deflection
-``s·d``, ``s`` in m for a translation, rad for a rotation); at every step the loaded
-equilibrium of eq. (5) is solved by continuation from the previous one
-(:class:`~vjm_pin.solver.EquilibriumSolver` warm start; its perturbed restarts leave an
-equilibrium that has become unstable, so the *stable* branch is followed), its stability
-is checked (eq. 23) and the tangent stiffness along ``d`` is ``dᵀ K_C d`` with ``K_C`` of
-eq. (30). From a stable point the next one is first tried from the tangent predictor
-(eq. 29, ``δq = K_q δt``, ``δθ = K_θ δt``) with plain Newton steps only; when that does not
-give a stable equilibrium the point is solved from the previous equilibrium as above.
+The curve
+---------
+The end is moved along a fixed unit direction ``d`` (deflection ``s·d``, ``s`` in m for a
+translation, rad for a rotation) with every task component held: the loaded equilibrium
+of eq. (5) is deflection-driven. The *followed branch* is traced by predictor–corrector
+continuation: the tangent predictor of eq. (29) (``δq = K_q δt``, ``δθ = K_θ δt``,
+``δF = K_C δt`` with ``δt = δs·d``), a plain Newton corrector, and adaptive sub-steps inside
+every requested step. A sub-step is accepted only when the corrected configuration stays
+close to the prediction (``‖x − x_pred‖ ≤`` :data:`CORRECTOR_RATIO` ``·‖x_pred − x_a‖``,
+scaled by rad and the chain length, the prediction itself at most :data:`MAX_MOVE`), and
+a sub-step over which a stability verdict changes only when it is short
+(:data:`FINE_STEP`): the continuation does not jump to another branch, however large the
+requested step. Every reported point of the followed branch is stable
+under the control as run (eq. 23 with the end held, ``stable_end_held``). When the
+continued branch loses that stability (a bifurcation) the followed branch switches to
+the stable branch that leaves it: the configuration is perturbed along the critical
+eigenvector of eq. (23), both signs, re-solved just past the critical deflection, and the
+lower-energy stable equilibrium is kept (the first sign on a tie).
 
-Critical point rule (buckling)
-------------------------------
-Between two consecutive points ``a`` (stable) and ``b`` there is a critical point when
+Critical points
+---------------
+A critical point is where the followed equilibrium stops being stable under **force
+control along d**: the components of the end orthogonal to ``d`` (within the task) held,
+a dead force along ``d``. Its measure is ``μ(s)``, the largest eigenvalue of the matrix
+``Vᵀ(H − K)V`` of :func:`~vjm_pin.solver.stability.check_stability_held` on the null
+space ``V`` of ``P·[J_θ J_q]`` (``P``: orthonormal rows spanning the complement of ``d``
+within the task rows): stable iff ``μ < 0``; a point reports ``force_control_margin =
+−μ``. Because ``V`` contains the null space of eq. (23), ``μ ≥`` the largest eigenvalue
+of eq. (23) (so ``μ ≥ 0`` wherever the end-held equilibrium is unstable or bifurcates),
+and where eq. (23) is regular ``μ = 0`` exactly where the force along ``d`` is stationary
+(``dF/ds = dᵀK_C d = 0``, the Schur complement of the bordered matrix). So one
+continuous function gives every kind of critical point (``CriticalPoint.kind``):
 
-1. ``b`` is unstable (the followed equilibrium lost stability and no stable one was
-   found), or
-2. the tangent stiffness drops sharply: ``k_a > 0`` and ``k_b < DROP_RATIO · k_a`` with
-   :data:`DROP_RATIO` = 0.5 (the followed stable equilibrium jumped to another branch:
-   bifurcation, e.g. the straight, axially stiff column of Models B/C turning into the
-   bent one; ``k_a = inf`` for a straight chain of rigid links, Model A).
+``"bifurcation"``
+    ``μ`` crosses zero from below and the continued branch then loses the stability of
+    eq. (23) (buckling of the straight column, Models A/B/C in the S posture); the
+    followed branch switches to the stable bent branch.
+``"limit"``
+    ``μ`` crosses zero from below and the branch stays stable with the end held (a
+    force maximum, ``dF/ds`` changes sign): it is followed on.
+``"imperfect"``
+    An imperfect bifurcation: the branch stays stable under force control but nearly
+    loses it. A local minimum ``m*`` of the margin ``m(s) = −μ(s) > 0`` at which the margin
+    has fallen below :data:`IMPERFECT_RATIO` times its largest value on the same continuous
+    stretch of the followed branch (since the start, the last critical point or the last
+    branch switch). Model B in the Z posture (paper: 1.07 Kθ/L) is of this kind: its force
+    keeps rising, with a sharp knee.
 
-It is then located by bisection on ``s``: a trial point, solved from ``a``'s state, is
-"before" when it is stable and its stiffness is at least ``DROP_RATIO · k_a``, else
-"after". Bisection stops when the force is known to ``refine_tol`` (relative): the force
-change across the bracket on the pre-critical side, ``k·Δs``, or the change of the
-post-critical force between two bisections is below ``refine_tol·|F|``. The critical
-force is the force at the end of the pre-critical branch (or, when that branch is a
-rigid point, the limit of the post-critical force).
+``μ`` crossing zero from above (stability regained, e.g. a force minimum) is not a
+critical point. Roots are found by Illinois regula falsi on ``μ(s)`` and the margin
+minimum by the same on ``dμ/ds``, both on the continued branch, every trial equilibrium
+reached by continuation (with the continuity check) from the nearer end of the bracket;
+the force is located to ``1e-3·refine_tol`` relative. Two crossings within one step
+cannot hide: over every sub-step a cubic Hermite model of ``μ`` from its values and its
+derivatives along the branch (``dμ/ds`` by a finite difference along the tangent of
+eq. 29) is checked, and the sub-step is sampled at the model's extremum whenever the
+model comes within its own curvature of zero. A start that is rigid along ``d`` (a
+straight chain of rigid links, Model A S: the force at ``s = 0`` is indeterminate) is
+searched along the force at the unloaded configuration: the critical point is then at
+deflection 0. ``stiffness_before`` and ``stiffness_after`` are ``dᵀK_C d`` on the followed
+branch at ``s_c ∓ ε``, ``ε = max(`` :data:`OFFSET_REL` ``·|s_c|,`` :data:`OFFSET_ABS`
+``· max_deflection)``; one critical point per event.
 """
 
 from __future__ import annotations
@@ -40,17 +74,37 @@ import numpy as np
 from ..exceptions import InputError, NoEquilibrium, SingularStiffness
 from ..model import VjmModel
 from .equilibrium import EquilibriumResult, EquilibriumSolver
-from .stability import RANK_TOL, null_space
+from .stability import (
+    RANK_TOL,
+    STABILITY_TOL,
+    check_stability_held,
+    null_space,
+    reduced_matrix,
+    spectral_norm,
+)
 from .stiffness import stiffness_from_blocks
 
-#: A step whose tangent stiffness falls below this fraction of the previous one is a critical point.
-DROP_RATIO = 0.5
-#: Sub-steps of the continuation that follows the pre-critical branch past a detected drop.
-CONTINUATION_SUBSTEPS = 8
-#: Samples per level of the search for the closest approach to instability.
-MARGIN_SAMPLES = 8
-#: Maximum bisections when refining a critical point.
+#: Maximum iterations of a root or extremum search (Illinois).
 MAX_BISECTIONS = 60
+#: An interior minimum of the force-control margin below this fraction of its largest
+#: value on the same stretch of the followed branch is an imperfect bifurcation.
+IMPERFECT_RATIO = 0.1
+#: ``stiffness_before``/``_after`` are evaluated at ``s_c ∓ ε``, ``ε = max(OFFSET_REL·|s_c|,
+#: OFFSET_ABS·max_deflection)``; also the offset of a branch switch.
+OFFSET_REL = 1e-4
+OFFSET_ABS = 1e-6
+#: Continuity test of a continuation sub-step: corrector displacement ≤ this × predictor step.
+CORRECTOR_RATIO = 0.25
+#: A sub-step over which μ or eq. (23) changes sign is only accepted when it is at most
+#: this × max_deflection (a long step could land on the other, unstable branch of an
+#: imperfect bifurcation, close to the prediction); longer ones are halved.
+FINE_STEP = 1e-3
+#: Largest predicted move of one sub-step (rad; prismatic coordinates per chain length).
+MAX_MOVE = 0.1
+#: Smallest continuation sub-step, × max_deflection.
+MIN_STEP = 1e-10
+#: Largest recursion depth of the check for two crossings within one sub-step.
+DIP_DEPTH = 12
 
 
 @dataclass(frozen=True)
@@ -62,11 +116,17 @@ class CurvePoint:
         force: External force (N, or N·m) along the direction that holds the end there,
             ``dᵀ F``: positive when it pushes the end along the direction.
         wrench: (6,) full external wrench at equilibrium (N, N·m), world axes.
-        stable: Stability verdict of eq. (23).
+        stable: Verdict for the control as run: the end held in every task component
+            (deflection-driven), i.e. eq. (23).
         stiffness: Tangent stiffness ``dᵀ K_C d`` (N/m) with K_C of eq. (30); ``inf`` when
             the end cannot move along ``d`` to first order (straight chain of rigid
             links), ``nan`` when K_C is singular for another reason.
         equilibrium: The :class:`EquilibriumResult`.
+        stable_end_held: Eq. (23) alone (the end held in every task component).
+        force_control_margin: ``−μ``: minus the largest eigenvalue of the Hessian of the
+            total potential on the displacements that keep the components orthogonal to
+            the direction fixed (N·m/rad for spring coordinates); positive iff the point
+            is stable under a dead force along the direction (see the module docstring).
     """
 
     deflection: float
@@ -75,20 +135,24 @@ class CurvePoint:
     stable: bool
     stiffness: float
     equilibrium: EquilibriumResult = field(repr=False)
+    stable_end_held: bool = True
+    force_control_margin: float = float("nan")
 
 
 @dataclass(frozen=True)
 class CriticalPoint:
-    """A critical (buckling) point, located to ``refine_tol`` in force.
+    """A critical point (module docstring), located to ``1e-3·refine_tol`` in force.
 
     Attributes:
         force: Critical force (N) along the direction.
         deflection: Critical deflection (m or rad) along the direction.
-        stiffness_before: Tangent stiffness (N/m) just before (pre-critical branch).
-        stiffness_after: Tangent stiffness (N/m) just after (the branch followed next).
+        stiffness_before: Tangent stiffness ``dᵀK_C d`` (N/m) on the followed branch at
+            ``deflection − ε`` (see the module docstring for ε).
+        stiffness_after: The same at ``deflection + ε`` on the branch followed next.
         index: Index in ``Curve.points`` of the first point after it.
-        force_after: Force (N) of the followed branch just after the critical deflection.
-        bisections: Number of bisections used.
+        force_after: Force (N) of the followed branch at ``deflection + ε``.
+        bisections: Iterations of the root (or extremum) search.
+        kind: ``"bifurcation"``, ``"limit"`` or ``"imperfect"``.
     """
 
     force: float
@@ -98,6 +162,7 @@ class CriticalPoint:
     index: int
     force_after: float = float("nan")
     bisections: int = 0
+    kind: str = "bifurcation"
 
 
 @dataclass(frozen=True)
@@ -158,14 +223,14 @@ def tangent_stiffness(
     ``inf`` when the end cannot move along ``d`` to first order ([J_θ J_q] does not reach
     ``d``: a straight chain of rigid links), ``nan`` when K_C is singular otherwise.
     """
-    return _stiffness_along(vm, eq, direction, kin)[0]
-
-
-def _stiffness_along(vm, eq: EquilibriumResult, direction: np.ndarray, kin):
-    """(:func:`tangent_stiffness`, the :class:`StiffnessResult` of eq. 30 or None when singular)."""
     from . import blocks_at
 
-    b = blocks_at(vm, eq.x, eq.wrench, kin)  # kept by the solver when it evaluated them
+    return _stiffness_along(vm, blocks_at(vm, eq.x, eq.wrench, kin), direction)[0]
+
+
+def _stiffness_along(vm, b, direction: np.ndarray):
+    """(:func:`tangent_stiffness`, the :class:`StiffnessResult` of eq. 30 or None when
+    singular) from the blocks ``b`` at the equilibrium."""
     try:
         st = stiffness_from_blocks(b, vm.task, "eq30")
     except SingularStiffness:
@@ -180,56 +245,36 @@ def _stiffness_along(vm, eq: EquilibriumResult, direction: np.ndarray, kin):
     return float(direction @ st.stiffness @ direction), st
 
 
+def _max_eig(res) -> float:
+    ev = res.eigenvalues
+    return float(ev.max()) if ev.size else -np.inf
+
+
+def _complement_rows(vm, d: np.ndarray) -> np.ndarray:
+    """(m−1, m) orthonormal rows spanning the complement of ``d`` within the m task rows."""
+    dt = d[list(vm.task)].reshape(-1, 1)
+    u = np.linalg.svd(dt, full_matrices=True)[0]
+    return u[:, 1:].T.copy()
+
+
 def _point(vm, eq: EquilibriumResult, s: float, d: np.ndarray, kin) -> CurvePoint:
-    return _point_and_stiffness(vm, eq, s, d, kin)[0]
+    """A :class:`CurvePoint` at the equilibrium ``eq`` (other branches, not followed)."""
+    from . import blocks_at
 
-
-def _point_and_stiffness(vm, eq: EquilibriumResult, s: float, d: np.ndarray, kin):
-    k, st = _stiffness_along(vm, eq, d, kin)
-    point = CurvePoint(
+    b = blocks_at(vm, eq.x, eq.wrench, kin)
+    k = _stiffness_along(vm, b, d)[0]
+    held = bool(check_stability_held(b, None).stable)
+    mu = _max_eig(check_stability_held(b, _complement_rows(vm, d)))
+    return CurvePoint(
         deflection=float(s),
         force=float(d @ eq.wrench),
         wrench=np.asarray(eq.wrench, float).copy(),
-        stable=bool(eq.stable),
+        stable=held,
         stiffness=k,
         equilibrium=eq,
+        stable_end_held=held,
+        force_control_margin=-mu,
     )
-    return point, st
-
-
-def _predicted(vm, solver: EquilibriumSolver, a: CurvePoint, st, s: float, d: np.ndarray):
-    """Equilibrium at ``s`` from the tangent predictor of the stable point ``a``: its
-    configuration moved by eq. (29), ``δq = K_q δt``, ``δθ = K_θ δt`` with ``δt = (s − s_a) d``,
-    then the plain local Newton iteration only. None when that does not give an acceptable
-    equilibrium: the caller then solves from ``a`` itself, as without a predictor."""
-    dt = (s - a.deflection) * d
-    x0 = a.equilibrium.x.copy()
-    x0[vm.theta_idx] += st.dtheta_dt @ dt
-    x0[vm.q_idx] += st.dq_dt @ dt
-    if not np.all(np.isfinite(x0)):
-        return None, 0
-    eq = solver._solve_local(s * d, x0)
-    return eq, solver._fast_its
-
-
-def _is_drop(k_a: float, k_b: float) -> bool:
-    if np.isnan(k_a) or np.isnan(k_b):
-        return False
-    if np.isinf(k_a):
-        return not np.isinf(k_b)
-    # only a stiff (positive) state can lose stiffness sharply; a softening post-critical
-    # branch (k ≤ 0, force falling) is not a new critical point
-    return k_a > 0 and k_b < DROP_RATIO * k_a
-
-
-def _same_branch(a: CurvePoint, m: CurvePoint) -> bool:
-    """A trial point ``m`` is still on the pre-critical branch of ``a``."""
-    return m.stable and not _is_drop(a.stiffness, m.stiffness)
-
-
-def _max_eig(eq: EquilibriumResult) -> float:
-    ev = eq.stability.eigenvalues if eq.stability is not None else np.zeros(0)
-    return float(ev.max()) if ev.size else -np.inf
 
 
 def illinois(evaluate, lo, flo, hi, fhi, coord, done, max_iter: int):
@@ -262,177 +307,484 @@ def illinois(evaluate, lo, flo, hi, fhi, coord, done, max_iter: int):
     return lo, flo, hi, fhi, n, True
 
 
-def _refine_eigen(
-    vm, d, a: CurvePoint, b: CurvePoint, index: int, kin, refine_tol: float, solver: EquilibriumSolver
-):
-    """Bifurcation from the pre-critical branch: continue that branch past it (Newton
-    without the stability safeguard, warm start from ``a``) and find where the largest
-    eigenvalue of the matrix of eq. (23) crosses zero (Illinois regula falsi). Returns
-    None when the pre-critical branch does not continue to ``b``'s deflection as an
-    unstable equilibrium (e.g. a fold): the caller then bisects."""
-    if not np.isfinite(a.stiffness):
-        return None
-    # (the caller's Kinematics is shared: a new pin.Data costs seconds for subdivided models)
-    unstable = solver._sibling(follow_stable=False, tol=solver.tol, restarts=0)
-    task = list(vm.task)
-    # continuation in sub-steps, each checked against the tangent predictor, keeps to the
-    # branch connected to ``a``; stop at the first sub-step where eq. (23) fails
-    lo, pb = a, None
-    try:
-        for j in range(1, CONTINUATION_SUBSTEPS + 1):
-            s = a.deflection + (b.deflection - a.deflection) * j / CONTINUATION_SUBSTEPS
-            eq = unstable.solve(s * d, x0=lo.equilibrium.x, wrench0=lo.equilibrium.wrench[task])
-            if not eq.converged:
-                return None
-            m = _point(vm, eq, s, d, kin)
-            pred = lo.stiffness * (s - lo.deflection)
-            if not np.isfinite(m.stiffness) or abs(m.force - lo.force - pred) > 0.5 * abs(
-                pred
-            ) + 1e-9 * abs(m.force):
-                return None  # jumped to another branch (or a fold): not a continued branch
-            if _max_eig(eq) > 0:
-                pb = m
-                break
-            lo = m
-    except NoEquilibrium:
-        return None
-    if pb is None:
-        return None
-    flo, fhi = _max_eig(lo.equilibrium), _max_eig(pb.equilibrium)
-    hi = pb
-    def evaluate(s, lo_, _hi):
-        try:  # warm start from the stable end of the bracket, as it moves
-            eq = unstable.solve(s * d, x0=lo_.equilibrium.x, wrench0=lo_.equilibrium.wrench[task])
-        except NoEquilibrium:
+def _hermite_extremum(s0, f0, g0, s1, f1, g1, maximum: bool):
+    """Interior extremum of the cubic Hermite interpolant of ``f`` (values ``f0, f1``,
+    derivatives ``g0, g1`` at ``s0 < s1``): ``(t, value, deviation)`` with ``t ∈ (0, 1)``
+    the relative position, ``deviation`` the distance there to the chord; None if the
+    cubic has no interior maximum (``maximum``) or minimum."""
+    h = s1 - s0
+    a0, a1 = h * g0, h * g1
+    # p(t) = f0 + a0 t + c t² + e t³
+    c = 3 * (f1 - f0) - 2 * a0 - a1
+    e = 2 * (f0 - f1) + a0 + a1
+    # p'(t) = a0 + 2c t + 3e t² = 0
+    if abs(e) > 1e-14 * (abs(c) + abs(a0) + abs(a1)):
+        disc = c * c - 3 * e * a0
+        if disc < 0:
             return None
-        return (_point(vm, eq, s, d, kin), _max_eig(eq)) if eq.converged else None
-
-    def done(lo_, hi_, m, s):
-        k = max(abs(lo_.stiffness), abs(hi_.stiffness))
-        return abs(hi_.deflection - lo_.deflection) * k <= 0.5 * refine_tol * max(abs(m.force), 1e-300)
-
-    lo, flo, hi, fhi, n, ok = illinois(evaluate, lo, flo, hi, fhi, lambda p: p.deflection, done, MAX_BISECTIONS)
-    if not ok:
+        r = disc**0.5
+        roots = ((-c + r) / (3 * e), (-c - r) / (3 * e))
+    elif c != 0:
+        roots = (-a0 / (2 * c),)
+    else:
         return None
-    # the root by linear interpolation of the eigenvalue, force likewise
-    w = flo / (flo - fhi) if fhi != flo else 0.5
-    s_c = lo.deflection + w * (hi.deflection - lo.deflection)
-    f_c = lo.force + w * (hi.force - lo.force)
-    return CriticalPoint(
-        force=float(f_c),
-        deflection=float(s_c),
-        stiffness_before=float(lo.stiffness),
-        stiffness_after=float(b.stiffness),
-        index=index,
-        force_after=float(b.force),
-        bisections=n,
-    )
-
-
-def _refine_margin(
-    vm, solver, d, start: CurvePoint, b: CurvePoint, index: int, kin, refine_tol: float
-):
-    """Imperfect bifurcation: the followed stable branch stays stable but its stiffness
-    collapses. The critical point is the closest approach to instability: the maximum of
-    the largest eigenvalue of the matrix of eq. (23) along the followed branch, searched by
-    continuation from ``start`` on nested grids. Returns None if no interior maximum."""
-    task = list(vm.task)
-    lo_eq, lo_s, hi_s = start.equilibrium, start.deflection, b.deflection
     best = None
-    for _level in range(MAX_BISECTIONS):
-        pts = []
-        eq = lo_eq
-        for j in range(MARGIN_SAMPLES + 1):
-            s = lo_s + (hi_s - lo_s) * j / MARGIN_SAMPLES
-            if j:
-                try:
-                    eq = solver.solve(s * d, x0=eq.x, wrench0=eq.wrench[task])
-                except NoEquilibrium:
-                    return None
-            pts.append(_point(vm, eq, s, d, kin))
-        ev = [_max_eig(p.equilibrium) for p in pts]
-        jm = int(np.argmax(ev))
-        if (jm == 0 or jm == MARGIN_SAMPLES) and best is None:
-            return None
-        jm = min(max(jm, 1), MARGIN_SAMPLES - 1)
-        best = pts[jm]
-        k = max(abs(pts[jm - 1].stiffness), abs(pts[jm + 1].stiffness))
-        if k * (pts[jm + 1].deflection - pts[jm - 1].deflection) <= refine_tol * max(
-            abs(best.force), 1e-300
-        ):
-            break
-        lo_eq, lo_s, hi_s = pts[jm - 1].equilibrium, pts[jm - 1].deflection, pts[jm + 1].deflection
+    for t in roots:
+        if not 0.0 < t < 1.0:
+            continue
+        curv = 2 * c + 6 * e * t
+        if (curv < 0) != maximum:
+            continue
+        v = f0 + a0 * t + c * t * t + e * t**3
+        if best is None or (v > best[1]) == maximum:
+            best = (t, v, abs(v - (f0 + (f1 - f0) * t)))
     return best
 
 
-def _refine(
-    vm,
-    solver,
-    d,
-    a: CurvePoint,
-    b: CurvePoint,
-    index: int,
-    kin,
-    refine_tol: float,
-    before: CurvePoint | None = None,
-) -> CriticalPoint:
-    found = _refine_eigen(vm, d, a, b, index, kin, refine_tol, solver)
-    if found is not None:
-        return found
-    if b.stable:
-        m = _refine_margin(vm, solver, d, before or a, b, index, kin, refine_tol)
-        if m is not None:
-            return CriticalPoint(
-                force=m.force,
-                deflection=m.deflection,
-                stiffness_before=a.stiffness,
-                stiffness_after=b.stiffness,
-                index=index,
-                force_after=b.force,
-                bisections=0,
-            )
-    lo, hi = a, b
-    prev_after = b.force
-    n = 0
-    for n in range(1, MAX_BISECTIONS + 1):
-        scale = max(abs(lo.force), abs(hi.force), 1e-300)
-        ds = hi.deflection - lo.deflection
-        pre_known = np.isfinite(lo.stiffness) and abs(lo.stiffness * ds) <= refine_tol * scale
-        if pre_known and lo.deflection != 0.0 or ds <= 1e-14 * max(abs(hi.deflection), 1e-300):
-            break
-        s = 0.5 * (lo.deflection + hi.deflection)
-        try:
-            eq = solver.solve(
-                s * d, x0=a.equilibrium.x, wrench0=a.equilibrium.wrench[list(vm.task)]
-            )
-        except NoEquilibrium:
-            break
-        m = _point(vm, eq, s, d, kin)
-        if _same_branch(a, m):
-            lo = m
+class _BP:
+    """A point of a continued branch (internal): equilibrium, force, tangent stiffness,
+    eq. (30) result, ``μ`` (force control) and ``λ`` (largest eigenvalue of eq. 23)."""
+
+    __slots__ = ("dmu", "eq", "force", "k", "lam", "mu", "s", "st", "tan")
+
+    def __init__(self, s, eq, force, k, st, mu, lam):
+        self.s, self.eq, self.force, self.k, self.st = float(s), eq, float(force), k, st
+        self.mu, self.lam, self.dmu, self.tan = mu, lam, None, False
+
+
+class _Tracer:
+    """The followed branch of one curve and its critical points (module docstring)."""
+
+    def __init__(self, vm, d, max_deflection, solver: EquilibriumSolver, refine_tol):
+        self.vm, self.d, self.solver = vm, d, solver
+        self.kin = solver.kin
+        # plain Newton on whichever branch it starts on (shares the solver's pin.Data)
+        self.cont = solver._sibling(follow_stable=False, restarts=0, tol=solver.tol)
+        self.range = float(max_deflection)
+        self.P = _complement_rows(vm, d)
+        self.free = solver.free
+        self.var_scale = solver.var_scale
+        self.hmin = MIN_STEP * self.range
+        self.eps_abs = OFFSET_ABS * self.range
+        self.refine_tol = refine_tol
+        self.thr = STABILITY_TOL * (spectral_norm(vm.K_theta) if vm.K_theta.size else 1.0)
+        self.h = self.range
+        self.seg_margin = 0.0  # largest −μ on the current stretch of the followed branch
+
+    # ------------------------------------------------------------------ evaluation
+    def blocks(self, x, w):
+        from . import blocks_at
+
+        return blocks_at(self.vm, x, w, self.kin)
+
+    def point(self, eq: EquilibriumResult, s: float) -> _BP:
+        b = self.blocks(eq.x, eq.wrench)
+        k, st = _stiffness_along(self.vm, b, self.d)
+        mu = _max_eig(check_stability_held(b, self.P))
+        held = getattr(eq, "stability_end_held", None)  # eq. (23) as the solver found it
+        if held is None and getattr(eq, "held", None) is None:
+            held = eq.stability  # every task component held: the verdict of eq. (23)
+        lam = _max_eig(held if held is not None else check_stability_held(b, None))
+        return _BP(s, eq, self.d @ eq.wrench, k, st, mu, lam)
+
+    def tangent(self, p: _BP):
+        """(dx/ds (nq,), dF/ds (6,)) along the branch at ``p`` (eq. 29), or None."""
+        if p.tan is False:
+            p.tan = self._tangent(p)
+        return p.tan
+
+    def _tangent(self, p: _BP):
+        if p.st is None:
+            return None
+        xd = np.zeros_like(p.eq.x)
+        xd[self.vm.theta_idx] = p.st.dtheta_dt @ self.d
+        xd[self.vm.q_idx] = p.st.dq_dt @ self.d
+        wd = p.st.stiffness @ self.d
+        if not (np.all(np.isfinite(xd)) and np.all(np.isfinite(wd))):
+            return None
+        return xd, wd
+
+    def dmu(self, p: _BP) -> float:
+        """``dμ/ds`` at ``p``: forward difference of ``μ`` along the tangent (eq. 29) over a
+        step that moves the configuration by 1e-6 (rad, scaled): error O(1e-6·μ'')."""
+        if p.dmu is None:
+            t = self.tangent(p)
+            if t is None:
+                p.dmu = float("nan")
+            else:
+                xd, wd = t
+                sc = float(np.abs(xd[self.free] / self.var_scale).max())
+                h = 1e-6 * self.range
+                if sc * h > 1e-6:
+                    h = 1e-6 / sc
+                b = self.blocks(p.eq.x + h * xd, p.eq.wrench + h * wd)
+                p.dmu = (_max_eig(check_stability_held(b, self.P)) - p.mu) / h
+        return p.dmu
+
+    def scaled(self, dx) -> float:
+        return float(np.abs(dx[self.free] / self.var_scale).max()) if dx.size else 0.0
+
+    # ------------------------------------------------------------------ continuation
+    def step(self, a: _BP, s: float) -> _BP | None:
+        """``a``'s branch continued to ``s``: predictor (eq. 29), plain Newton corrector,
+        continuity check; None when the corrector strays (or does not converge)."""
+        s = float(s)
+        t = self.tangent(a)
+        ds = s - a.s
+        if t is not None:
+            x_pred = a.eq.x + ds * t[0]
+            w_pred = a.eq.wrench + ds * t[1]
         else:
-            hi = m
-            if np.isinf(lo.stiffness) and abs(m.force - prev_after) <= 0.5 * refine_tol * abs(
-                m.force
+            x_pred, w_pred = a.eq.x.copy(), a.eq.wrench.copy()
+        target = s * self.d
+        eq = self.cont._solve_local(target, x_pred)
+        if eq is None:
+            if abs(ds) > 1e-4 * self.range and len(self.vm.task) < len(self.free):
+                return None  # a shorter step first: the safeguarded path is costly
+            try:
+                eq = self.cont.solve(
+                    target, x0=x_pred, wrench0=w_pred, raise_on_failure=False, fast_fail=True
+                )
+            except NoEquilibrium:  # pragma: no cover - raise_on_failure=False
+                return None
+            if not eq.converged:
+                return None
+        if self.scaled(x_pred - a.eq.x) > MAX_MOVE:
+            return None
+        corr = self.scaled(eq.x - x_pred)
+        if t is not None:
+            ok = corr <= CORRECTOR_RATIO * self.scaled(x_pred - a.eq.x) + 1e-9
+        else:
+            ok = corr <= 1e-2
+        return self.point(eq, s) if ok else None
+
+    def reach(self, a: _BP, s: float) -> _BP | None:
+        """``a``'s branch continued to ``s`` in adaptive sub-steps; None if it cannot be."""
+        cur, h = a, s - a.s
+        if abs(h) <= 1e-14 * self.range:
+            return a
+        while cur.s != s:
+            rem = s - cur.s
+            if abs(h) >= abs(rem) or abs(rem - h) <= 1e-14 * self.range:
+                h = rem
+            nxt = self.step(cur, s if h == rem else cur.s + h)
+            if nxt is None:
+                h *= 0.5
+                if abs(h) < self.hmin:
+                    return None
+                continue
+            cur = nxt
+            h *= 2.0
+        return cur
+
+    def reach_or_predict(self, a: _BP, s: float) -> _BP | None:
+        """:meth:`reach`, or, when the corrector cannot converge within a fine step of
+        ``a`` (next to a bifurcation the deflection-driven Newton matrix is singular), the
+        tangent prediction of eq. (29) itself (error O(δs²))."""
+        m = self.reach(a, s)
+        if m is not None or abs(s - a.s) > FINE_STEP * self.range:
+            return m
+        t = self.tangent(a)
+        if t is None:
+            return None
+        ds = s - a.s
+        eq = replace(
+            a.eq, x=a.eq.x + ds * t[0], wrench=a.eq.wrench + ds * t[1], path="tangent-prediction"
+        )
+        return self.point(eq, s)
+
+    def _nearest(self, s, pts):
+        return min(pts, key=lambda p: abs(p.s - s))
+
+    def eps(self, s_c: float) -> float:
+        return max(OFFSET_REL * abs(s_c), self.eps_abs)
+
+    # ------------------------------------------------------------------ branch switch
+    def switch(self, u: _BP, s: float) -> _BP | None:
+        """The stable branch leaving the bifurcation at ``u`` (continued branch, on the
+        verge of losing eq. 23), solved at ``s``: ``u`` perturbed along ± the critical
+        eigenvector of eq. (23), the stable solver, the lower energy (first sign on a tie)."""
+        b = self.blocks(u.eq.x, u.eq.wrench)
+        z = null_space(b.J_theta, b.J_q)
+        cands = []
+        if z.shape[1]:
+            v = np.linalg.eigh(reduced_matrix(b, z))[1]
+            vec = np.zeros_like(u.eq.x)
+            vec[self.free] = z @ v[:, -1]
+            vec /= max(self.scaled(vec), 1e-300)
+            for amp in (1e-3, 1e-2, 1e-1):
+                for sign in (1.0, -1.0):
+                    eq = self.solver.solve(
+                        s * self.d,
+                        x0=u.eq.x + sign * amp * vec,
+                        wrench0=u.eq.wrench,
+                        raise_on_failure=False,
+                    )
+                    if eq.converged:
+                        p = self.point(eq, s)
+                        if p.lam < -self.thr:
+                            cands.append(p)
+                if cands:
+                    break
+        if not cands:
+            eq = self.solver.solve(
+                s * self.d, x0=u.eq.x, wrench0=u.eq.wrench, raise_on_failure=False
+            )
+            if not eq.converged:
+                return None
+            return self.point(eq, s)
+        best = cands[0]
+        for p in cands[1:]:
+            if p.eq.energy < best.eq.energy - 1e-9 * max(abs(best.eq.energy), 1e-300):
+                best = p
+        return best
+
+    def jump(self, a: _BP, s: float) -> _BP:
+        """The stable solver at ``s`` from ``a`` (the branch cannot be continued)."""
+        eq = self.solver.solve(s * self.d, x0=a.eq.x, wrench0=a.eq.wrench)
+        return self.point(eq, s)
+
+    # ------------------------------------------------------------------ events
+    def first_event(self, p: _BP, q: _BP, depth: int = 0):
+        """The first candidate event on the continued branch over ``[p, q]``:
+        ``("cross", lo, hi)`` (μ crosses zero from below in it), ``("max", lo, hi)`` (an
+        interior maximum of μ < 0), or None."""
+        if p.mu < 0 <= q.mu:
+            return ("cross", p, q)
+        if depth >= DIP_DEPTH or q.s - p.s <= 4 * self.hmin:
+            return None
+        g0, g1 = self.dmu(p), self.dmu(q)
+        if not (np.isfinite(g0) and np.isfinite(g1)):
+            return None
+        both_neg = p.mu < 0 and q.mu < 0
+        if not both_neg and not (p.mu >= 0 and q.mu >= 0):
+            return None  # μ falls through zero: stability regained (not an event)
+        ext = _hermite_extremum(p.s, p.mu, g0, q.s, q.mu, g1, maximum=both_neg)
+        if ext is None:
+            return None
+        t, v, dev = ext
+        tiny = 1e-12 * max(abs(p.mu), abs(q.mu), self.thr)
+        near = v >= -0.5 * dev - tiny if both_neg else v <= 0.5 * dev + tiny
+        if near:
+            m = self.reach(p, p.s + t * (q.s - p.s))
+            if m is None:
+                return None
+            return self.first_event(p, m, depth + 1) or self.first_event(m, q, depth + 1)
+        if both_neg and g0 > 0 >= g1 and -v <= 1.5 * IMPERFECT_RATIO * self.seg_margin:
+            return ("max", p, q)
+        return None
+
+    def locate_cross(self, lo: _BP, hi: _BP):
+        """Root of μ in ``[lo, hi]`` on their branch: (point at s_c, iterations)."""
+        pts = [lo, hi]
+        tol = 1e-3 * self.refine_tol
+
+        def evaluate(s, lo_, hi_):
+            m = self.reach_or_predict(lo_ if s - lo_.s <= hi_.s - s else hi_, s)
+            if m is None:
+                return None
+            pts.append(m)
+            return m, m.mu
+
+        def done(lo_, hi_, m, s):
+            k = max(abs(lo_.k), abs(hi_.k)) if np.isfinite(lo_.k) and np.isfinite(hi_.k) else 0.0
+            w = hi_.s - lo_.s
+            return w * k <= tol * max(abs(m.force), 1e-300) or w <= 1e-13 * self.range
+
+        lo2, flo, hi2, fhi, n, _ = illinois(
+            evaluate, lo, lo.mu, hi, hi.mu, lambda p: p.s, done, MAX_BISECTIONS
+        )
+        w = flo / (flo - fhi) if fhi != flo else 0.5
+        s_c = lo2.s + w * (hi2.s - lo2.s)
+        c = self.reach_or_predict(lo2 if s_c - lo2.s <= hi2.s - s_c else hi2, s_c) or lo2
+        return c, lo, hi, n
+
+    def locate_max(self, lo: _BP, hi: _BP):
+        """Maximum of μ in ``[lo, hi]`` on their branch (``dμ/ds(lo) > 0 ≥ dμ/ds(hi)``):
+        Illinois on ``dμ/ds``; (point, iterations)."""
+        pts = [lo, hi]
+
+        def evaluate(s, lo_, hi_):
+            m = self.reach_or_predict(lo_ if s - lo_.s <= hi_.s - s else hi_, s)
+            if m is None:
+                return None
+            pts.append(m)
+            return m, -self.dmu(m)
+
+        def done(lo_, hi_, m, s):
+            return hi_.s - lo_.s <= 1e-10 * self.range
+
+        illinois(
+            evaluate, lo, -self.dmu(lo), hi, -self.dmu(hi), lambda p: p.s, done, MAX_BISECTIONS
+        )
+        best = max(pts, key=lambda p: p.mu)
+        return best, len(pts) - 2
+
+    def finish(self, c: _BP, lo: _BP, hi: _BP, kind: str, index: int, n: int, critical: list):
+        """Record the critical point at ``c`` (``lo``, ``hi``: points of the same branch
+        before and after it, reached from away from the singular point). Returns
+        ``(switched, plus)``: the point of the branch switched to (or None when the
+        branch is followed on) and the continued branch at ``s_c + ε``."""
+        e = self.eps(c.s)
+        before = self.reach_or_predict(lo, c.s - e) if lo.s < c.s - e else None
+        before = before or self.reach_or_predict(c, c.s - e)
+        k_before = before.k if before is not None else c.k
+        plus = self.reach_or_predict(hi, c.s + e) if hi.s > c.s + e else None
+        plus = plus or self.reach_or_predict(c, c.s + e)
+        switched = None
+        if kind != "imperfect" and (plus is None or plus.lam >= -self.thr):
+            kind = "bifurcation"
+            switched = self.switch(c, c.s + e)
+            after = switched
+        else:
+            if kind != "imperfect":
+                kind = "limit"
+            after = plus
+        cp = CriticalPoint(
+            force=float(c.force),
+            deflection=float(c.s),
+            stiffness_before=float(k_before),
+            stiffness_after=float(after.k) if after is not None else float("nan"),
+            index=index,
+            force_after=float(after.force) if after is not None else float("nan"),
+            bisections=int(n),
+            kind=kind,
+        )
+        if not critical or abs(cp.deflection - critical[-1].deflection) > 1e-6 * self.range:
+            critical.append(cp)
+        self.seg_margin = 0.0
+        return switched, plus
+
+    def process(self, p: _BP, q: _BP, index: int, critical: list) -> _BP:
+        """Events over the accepted sub-step ``[p, q]``; returns the followed point that
+        ends it (``q``, or the point of the branch switched to)."""
+        a = p
+        for _ in range(64):  # events within one sub-step: a handful at most
+            ev = self.first_event(a, q)
+            if ev is None:
+                return q
+            kind, lo, hi = ev
+            if kind == "cross":
+                c, lo0, hi0, n = self.locate_cross(lo, hi)
+                switched, plus = self.finish(c, lo0, hi0, "limit", index, n, critical)
+                if switched is not None:
+                    return switched
+            else:
+                c, n = self.locate_max(lo, hi)
+                if not (0 < -c.mu <= IMPERFECT_RATIO * max(self.seg_margin, -lo.mu)):
+                    return q
+                _, plus = self.finish(c, lo, hi, "imperfect", index, n, critical)
+            if plus is None or plus.s >= q.s:
+                return q
+            a = plus
+        return q
+
+    def advance(self, cur: _BP, s_end: float, index: int, critical: list) -> _BP:
+        """The followed branch from ``cur`` to ``s_end``: the point there."""
+        h = min(self.h, s_end - cur.s)
+        while cur.s < s_end:
+            rem = s_end - cur.s
+            h = min(h, rem)
+            s_try = s_end if rem - h <= 1e-14 * self.range else cur.s + h
+            nxt = self.step(cur, s_try)
+            if (
+                nxt is not None
+                and s_try - cur.s > FINE_STEP * self.range
+                and (cur.mu < 0 <= nxt.mu or cur.lam < -self.thr <= nxt.lam)
             ):
-                prev_after = m.force
-                break
-            prev_after = m.force
-    rigid_pre = (
-        np.isinf(lo.stiffness)
-        or lo.deflection == 0.0
-        and abs(lo.force) < 1e-12 * max(abs(hi.force), 1e-300)
-    )
-    force = hi.force if rigid_pre else lo.force
-    defl = hi.deflection if rigid_pre else lo.deflection
-    return CriticalPoint(
-        force=float(force),
-        deflection=float(defl),
-        stiffness_before=float(a.stiffness if rigid_pre else lo.stiffness),
-        stiffness_after=float(hi.stiffness),
-        index=index,
-        force_after=float(hi.force),
-        bisections=n,
+                nxt = None  # a stability change is only accepted over a fine step (no jump across a knee)
+            if nxt is None:
+                h *= 0.5
+                if h < self.hmin:  # the branch ends (fold): the stable solver jumps
+                    cur = self.jump(cur, s_try)
+                    self.seg_margin = 0.0
+                    h = self.range
+                continue
+            self.seg_margin = max(self.seg_margin, -cur.mu)
+            new = self.process(cur, nxt, index, critical)
+            if new is not nxt:  # switched branch at a bifurcation
+                cur = new if new is not None else nxt
+                self.seg_margin = 0.0
+                h = max(self.eps(cur.s), h / 4)
+                continue
+            if nxt.lam >= -self.thr and cur.lam < -self.thr:
+                # eq. (23) lost without a new force-control event (μ ≥ 0 already): switch
+                u, _, _ = self.locate_lam(cur, nxt)
+                sw = self.switch(
+                    u, min(u.s + self.eps(u.s), s_end) if s_end > u.s else u.s + self.eps(u.s)
+                )
+                cur = sw if sw is not None else nxt
+                self.seg_margin = 0.0
+                h = max(self.eps(cur.s), h / 4)
+                continue
+            cur = nxt
+            h *= 2.0
+            if s_try != s_end:  # a step not shortened to reach the grid point: remember it
+                self.h = h
+        if cur.s > s_end + 1e-14 * self.range:  # a switch landed past the grid point
+            back = self.reach(cur, s_end)
+            cur = back if back is not None and back.lam < -self.thr else self.jump(cur, s_end)
+        return cur
+
+    def locate_lam(self, lo: _BP, hi: _BP):
+        """Where the largest eigenvalue of eq. (23) crosses zero in ``[lo, hi]``: the last
+        point on the stable side."""
+
+        def evaluate(s, lo_, hi_):
+            m = self.reach(lo_ if s - lo_.s <= hi_.s - s else hi_, s)
+            return None if m is None else (m, m.lam)
+
+        def done(lo_, hi_, m, s):
+            return hi_.s - lo_.s <= 1e-12 * self.range
+
+        lo2, _, hi2, _, n, _ = illinois(
+            evaluate, lo, lo.lam, hi, hi.lam, lambda p: p.s, done, MAX_BISECTIONS
+        )
+        return lo2, hi2, n
+
+    # ------------------------------------------------------------------ rigid start
+    def rigid_start(self, p0: _BP):
+        """A start rigid along ``d``: the force at the unloaded configuration grows until
+        μ crosses zero. Returns ``(force, u)`` (``u`` the loaded reference point) or None."""
+        x = p0.eq.x
+
+        def mu(f):
+            return _max_eig(check_stability_held(self.blocks(x, f * self.d), self.P))
+
+        scale = max(self.solver.kscale / self.solver.length_scale, 1e-300)
+        lo, hi = 0.0, 1e-6 * scale
+        flo, fhi = mu(lo), mu(hi)
+        while fhi < 0:
+            lo, flo, hi = hi, fhi, 2 * hi
+            fhi = mu(hi)
+            if hi > 1e9 * scale:
+                return None
+        lo, flo, hi, fhi, _, _ = illinois(
+            lambda f, a, b: (f, mu(f)),
+            lo,
+            flo,
+            hi,
+            fhi,
+            float,
+            lambda a, b, m, f: b - a <= 1e-14 * b,
+            MAX_BISECTIONS,
+        )
+        f = lo + flo / (flo - fhi) * (hi - lo) if fhi != flo else hi
+        eq = replace(p0.eq, wrench=f * self.d)
+        return f, self.point(eq, 0.0)
+
+
+def _curve_point(p: _BP, thr: float) -> CurvePoint:
+    held = bool(p.lam < -thr)
+    return CurvePoint(
+        deflection=float(p.s),
+        force=float(p.force),
+        wrench=np.asarray(p.eq.wrench, float).copy(),
+        stable=held,
+        stiffness=p.k,
+        equilibrium=p.eq,
+        stable_end_held=held,
+        force_control_margin=float(-p.mu),
     )
 
 
@@ -441,7 +793,7 @@ def _trace_branch(vm, d, start_eq: EquilibriumResult, s_values, kin, solver) -> 
     prev = start_eq
     for s in s_values:
         try:
-            eq = solver.solve(s * d, x0=prev.x, wrench0=prev.wrench[list(vm.task)])
+            eq = solver.solve(s * d, x0=prev.x, wrench0=prev.wrench)
         except NoEquilibrium:
             break
         if not eq.converged:
@@ -455,7 +807,9 @@ def _distinct(eq: EquilibriumResult, others, tol=1e-6) -> bool:
     return all(np.linalg.norm(eq.x - o.x) > tol * max(1.0, np.linalg.norm(o.x)) for o in others)
 
 
-def _other_branches(vm, d, points, critical, s_grid, kin, solver) -> tuple[tuple[CurvePoint, ...], ...]:
+def _other_branches(
+    vm, d, points, critical, s_grid, kin, solver
+) -> tuple[tuple[CurvePoint, ...], ...]:
     """Branches that leave the critical points: seeds at the first step after each
     critical point, from the pre-critical state itself (the trivial branch continued) and
     from it displaced along ± each eigenvector of the reduced matrix of eq. (23), solved
@@ -483,7 +837,7 @@ def _other_branches(vm, d, points, critical, s_grid, kin, solver) -> tuple[tuple
                 seeds.append(x)
         for x0 in seeds:
             try:
-                eq = unstable.solve(rest[0] * d, x0=x0, wrench0=base.wrench[list(vm.task)])
+                eq = unstable.solve(rest[0] * d, x0=x0, wrench0=base.wrench)
             except NoEquilibrium:
                 continue
             if not eq.converged or eq.stable or not _distinct(eq, seen):
@@ -493,6 +847,39 @@ def _other_branches(vm, d, points, critical, s_grid, kin, solver) -> tuple[tuple
             seen.extend(p.equilibrium for p in pts[:1])
             branches.append(tuple(pts))
     return tuple(branches)
+
+
+def _unloaded(vm, solver, d, kin) -> EquilibriumResult | None:
+    """The unloaded reference as the first point when the chain is rigid along ``d``
+    there (straight chain of rigid links, Model A S): the force at zero deflection is then
+    indeterminate and the solver's perturbed start would pick an arbitrary one; the
+    unloaded state (zero wrench) is the natural start of the curve."""
+    from . import blocks_at
+    from .stability import check_stability
+
+    x = np.asarray(vm.reference, float).copy()
+    stat = vm.K_theta @ (x[vm.theta_idx] - vm.theta0)
+    if stat.size and np.abs(stat).max() > 0:
+        return None
+    b = blocks_at(vm, x, np.zeros(6), kin)
+    probe = EquilibriumResult(
+        x=x,
+        q=x[vm.q_idx].copy(),
+        theta=x[vm.theta_idx].copy(),
+        wrench=np.zeros(6),
+        deflection=np.zeros(6),
+        position=solver.p0.copy(),
+        rotation=solver.r0.copy(),
+        converged=True,
+        iterations=0,
+        residuals={"position": 0.0, "orientation": 0.0, "statics": 0.0},
+        energy=0.0,
+        path="reference",
+        stability=check_stability(b),
+    )
+    if not np.isinf(tangent_stiffness(vm, probe, d, kin)):
+        return None
+    return probe
 
 
 def _unloaded(vm, solver, d, kin) -> EquilibriumResult | None:
@@ -541,20 +928,29 @@ def trace_curve(
 ) -> Curve:
     """Trace the force–deflection curve of ``vm`` along ``direction`` (paper §6.1, Fig. 4–5).
 
+    The followed branch and its critical points are defined in the module docstring;
+    they do not depend on ``steps``, which only sets where the curve is reported.
+
     Args:
         vm: The model.
         direction: (3,) or (6,) direction of the end deflection, world axes; normalised;
             must lie in the task components and be a pure translation or rotation.
         max_deflection: Final deflection along the direction (m or rad), > 0.
         steps: Number of equal steps (the curve has ``steps + 1`` points, from 0).
-        solver: Equilibrium solver (default ``EquilibriumSolver(vm)``, follows the stable branch).
-        refine_tol: Relative force tolerance of the critical points.
+        solver: Equilibrium solver (default ``EquilibriumSolver(vm)``, follows the stable
+            branch); used for the start and for branch switches.
+        refine_tol: Relative force tolerance of the critical points (they are located
+            to ``1e-3·refine_tol``).
         all_branches: Also trace the branches that leave each critical point
             (unstable ones, as in Fig. 4) into ``Curve.branches``.
         progress: Optional ``callable(done, total)`` called after every step.
 
     Returns:
         The :class:`Curve`.
+
+    Raises:
+        InputError: bad direction, range, steps or tolerance.
+        NoEquilibrium: no equilibrium at some point of the range.
     """
     d = _direction(vm, direction)
     if not np.isfinite(max_deflection) or max_deflection <= 0:
@@ -569,34 +965,44 @@ def trace_curve(
     solver = solver or EquilibriumSolver(vm)
     kin = solver.kin
     s_grid = [max_deflection * i / steps for i in range(steps + 1)]
-    points: list[CurvePoint] = []
+    tr = _Tracer(vm, d, max_deflection, solver, refine_tol)
     critical: list[CriticalPoint] = []
-    prev = None
-    prev_stiffness = None  # StiffnessResult of the last point (tangent predictor)
-    task = list(vm.task)
-    for i, s in enumerate(s_grid):
-        if prev is None:
-            eq = _unloaded(vm, solver, d, kin) or solver.solve(s * d)
-        else:
-            eq, spent = None, 0
-            if prev_stiffness is not None and points[-1].stable:
-                eq, spent = _predicted(vm, solver, points[-1], prev_stiffness, s, d)
-            if eq is None:
-                eq = solver.solve(s * d, x0=prev.x, wrench0=prev.wrench[task])
-                if spent:
-                    eq = replace(eq, iterations=eq.iterations + spent)
-        p, prev_stiffness = _point_and_stiffness(vm, eq, s, d, kin)
-        if points:
-            a = points[-1]
-            if a.stable and (not p.stable or _is_drop(a.stiffness, p.stiffness)):
-                before = points[-2] if len(points) > 1 and points[-2].stable else None
-                c = _refine(vm, solver, d, a, p, i, kin, refine_tol, before)
-                h = max_deflection / steps
-                if not critical or abs(c.deflection - critical[-1].deflection) > 0.01 * h:
-                    critical.append(c)  # else the same transition, seen again one step later
-        points.append(p)
-        prev = eq
+    probe = _unloaded(vm, solver, d, kin)
+    first = tr.point(probe if probe is not None else solver.solve(0.0 * d), 0.0)
+    points = [_curve_point(first, tr.thr)]
+    cur = first
+    if probe is not None or not np.isfinite(first.k):
+        # rigid along d at the start: search along the force at the unloaded configuration
+        found = tr.rigid_start(first) if first.mu < 0 else None
+        s1 = s_grid[1]
+        if found is not None:
+            f, u = found
+            e = tr.eps(0.0)
+            after = tr.switch(u, e)
+            if after is not None:
+                critical.append(
+                    CriticalPoint(
+                        force=float(f),
+                        deflection=0.0,
+                        stiffness_before=float(first.k),
+                        stiffness_after=float(after.k),
+                        index=1,
+                        force_after=float(after.force),
+                        bisections=0,
+                        kind="bifurcation",
+                    )
+                )
+                cur = after
+        if cur is first:
+            cur = tr.jump(first, s1)
+    tr.seg_margin = max(0.0, -cur.mu)
+    if progress is not None:
+        progress(1, steps + 1)
+    for i, s in enumerate(s_grid[1:], start=1):
+        cur = tr.advance(cur, s, i, critical)
+        points.append(_curve_point(cur, tr.thr))
         if progress is not None:
             progress(i + 1, steps + 1)
+    points = tuple(points)
     branches = _other_branches(vm, d, points, critical, s_grid, kin, solver) if all_branches else ()
-    return Curve(direction=d, points=tuple(points), critical=tuple(critical), branches=branches)
+    return Curve(direction=d, points=points, critical=tuple(critical), branches=branches)
