@@ -3,6 +3,8 @@ rendered in headless Chromium (skipped when no chromium binary is installed)."""
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -18,7 +20,7 @@ from vjm_pin.viewer import (
     magnify,
 )
 
-from .browser import chromium, screenshot_frames
+from .browser import chromium, screenshot_grid
 
 # Three revolute joints, links of 0.4 m along x; j2 bends the chain out of the xy plane.
 CHAIN_URDF = """<robot name="chain3">
@@ -200,13 +202,35 @@ def test_animation_tracks(chain):
     assert not any(
         p.startswith("/meshcat/vjm/robot/joint:") and p.endswith("<object>") for p in tracks
     )
-    # the force arrow follows the tip and grows with the load
+    # the force arrow grows with the load; the forces push the tip back along the chain
+    # (-x), so the arrow is drawn outside it: on the force line through the tip, ending just
+    # short of the tip and pointing at it
     shaft = [k["value"][1] for k in tracks["/meshcat/vjm/force/shaft"][".scale"]]
     assert np.all(np.diff(shaft) > 0)
-    tip = anim._frame_oMf[N_FRAMES - 1][:3, 3]
-    np.testing.assert_allclose(
-        tracks["/meshcat/vjm/force"][".position"][-1]["value"], tip, atol=1e-12
+    assert anim.arrow_style == "head"
+    for k in (0, N_FRAMES - 1):
+        tip = anim._frame_oMf[k][:3, 3]
+        tail = np.array(tracks["/meshcat/vjm/force"][".position"][k]["value"])
+        f = forces[k] / np.linalg.norm(forces[k])
+        to_tip = tip - tail
+        assert np.linalg.norm(np.cross(to_tip, f)) < 1e-9 * np.linalg.norm(to_tip)  # on the line
+        assert to_tip @ f > shaft[k]  # the whole arrow (shaft + head) lies before the tip
+    # a pull (+x, away from the chain) starts at the tip instead
+    pull = Animation(
+        model,
+        geom,
+        frames,
+        forces=[-f for f in forces],
+        frame_name="tool",
+        critical_index=BEND_FRAME,
     )
+    assert pull.arrow_style == "tail"
+    ptracks = _animation_tracks(pull)
+    for k in (0, N_FRAMES - 1):
+        tip = pull._frame_oMf[k][:3, 3]
+        tail = np.array(ptracks["/meshcat/vjm/force"][".position"][k]["value"])
+        assert np.linalg.norm(tail - tip) < 0.05 * pull.scene_size
+        assert (tail - tip) @ (-forces[k]) > 0
 
 
 def test_animation_send_matches_commands(chain):
@@ -303,7 +327,7 @@ def test_browser_renders_animation(chain, tmp_path):
         path=page,
     )
     # the page pauses its player at the frame given in the URL fragment
-    img = screenshot_frames(browser, page, (0, 15), tmp_path)
+    img = screenshot_grid(browser, {k: (page, k) for k in (0, 15)}, tmp_path, cell=(800, 600))
     for k, a in img.items():
         assert a.shape == (600, 800, 3)
         assert a.std() > 10, f"frame {k}: blank screenshot"
@@ -372,4 +396,313 @@ def test_example_robot_data_robots_show_their_meshes():
     files = [g.meshPath for g in geom.geometryObjects]
     assert geom.ngeoms >= 6 and any(f.endswith(".dae") for f in files)
     chain = resolve_model("paper-c-s")
-    assert all(not g.meshPath.endswith((".dae", ".stl")) for g in robot_geometry(chain).geometryObjects)
+    assert all(
+        not g.meshPath.endswith((".dae", ".stl")) for g in robot_geometry(chain).geometryObjects
+    )
+
+
+# ----------------------------------------------------------------------------- curve pages
+# The paper's Model C chain in the S posture under end compression: the straight column is
+# axially stiff, so the critical point falls inside the first even curve step.
+PAPER = "paper-c-s"
+COMPRESS = np.array([-1.0, 0, 0, 0, 0, 0])
+MAX_DEFLECTION, STEPS, N_CURVE_FRAMES = 0.05, 20, 61
+
+
+@pytest.fixture(scope="module")
+def c_model():
+    from vjm_pin.registry import resolve_model
+
+    return resolve_model(PAPER)
+
+
+@pytest.fixture(scope="module")
+def c_curve_all(c_model):
+    from vjm_pin.solver.curve import trace_curve
+
+    return trace_curve(c_model, COMPRESS, MAX_DEFLECTION, STEPS, all_branches=True)
+
+
+@pytest.fixture(scope="module")
+def c_page(c_model, c_curve_all, tmp_path_factory):
+    from vjm_pin.cli.view import curve_page
+
+    path = tmp_path_factory.mktemp("curve") / "c.html"
+    cp = curve_page(c_model, c_curve_all, path=path, n_frames=N_CURVE_FRAMES)
+    return path, cp
+
+
+def _joints(vm, x) -> np.ndarray:
+    data = vm.model.createData()
+    pin.forwardKinematics(vm.model, data, np.asarray(x, float))
+    return np.array([m.translation for m in data.oMi[1:]])
+
+
+def _shape_steps(vm, xs) -> np.ndarray:
+    """Largest joint displacement (m) between consecutive configurations."""
+    j = [_joints(vm, x) for x in xs]
+    return np.array([np.linalg.norm(b - a, axis=1).max() for a, b in itertools.pairwise(j)])
+
+
+def _page_setup(text: str) -> dict:
+    import json
+    import re
+
+    return json.loads(re.search(r"var setup = (\{.*?\});\n", text, re.DOTALL).group(1))
+
+
+def test_curve_frames_show_the_buckling_in_slow_motion(c_model, c_curve_all, c_page):
+    _, cp = c_page
+    frames, k = list(cp.curve_frames), cp.critical_frame
+    c = c_curve_all.critical[0]
+    h = MAX_DEFLECTION / STEPS
+    assert c.deflection < h  # even curve steps: the critical point is inside the first one
+    s = np.array([f.deflection for f in frames])
+    assert np.all(np.diff(s) > 0)
+    # the critical frame is the pre-critical state at the critical deflection (force too)
+    assert frames[k].kind == "critical"
+    assert frames[k].deflection == pytest.approx(c.deflection, rel=1e-3)
+    assert frames[k].force == pytest.approx(c.force, rel=1e-3)
+    # both the pre-critical rise and the start of the buckling get many frames (even
+    # deflection frames would give them one step)
+    assert k >= 10
+    assert np.sum((s > c.deflection) & (s < c.deflection + h)) >= 8
+    # past the critical point the shape changes much faster than before it (where the chain
+    # only shortens), and no frame step carries more than a fifth of the whole change
+    steps = _shape_steps(c_model, [f.x for f in frames])
+    assert steps[k : k + 4].max() > 10 * steps[k - 5 : k - 1].max()
+    total = np.linalg.norm(
+        _joints(c_model, frames[-1].x) - _joints(c_model, frames[0].x), axis=1
+    ).max()
+    assert steps.max() < 0.2 * total
+
+
+def test_curve_frames_are_equilibria(c_model, c_page):
+    """Each frame re-solved independently (warm start from its predecessor's state, the way a
+    curve is traced) is the same equilibrium. Frames just past the bifurcation are skipped:
+    from the straight state the solver may pick the mirror-image bend."""
+    from vjm_pin.solver import EquilibriumSolver
+
+    _, cp = c_page
+    frames, k = list(cp.curve_frames), cp.critical_frame
+    solver = EquilibriumSolver(c_model)
+    picks = sorted(set(range(1, len(frames), 7)) - {k + 1} | {k, k + 2, k + 3})
+    for i in picks:
+        prev, f = frames[i - 1], frames[i]
+        eq = solver.solve(f.deflection * COMPRESS, x0=prev.x, wrench0=prev.wrench)
+        assert eq.converged
+        np.testing.assert_allclose(eq.x, f.x, atol=1e-6, err_msg=f"frame {i}")
+        assert float(COMPRESS @ eq.wrench) == pytest.approx(f.force, rel=1e-5, abs=1e-9)
+
+
+def test_other_branches_are_unstable_equilibria(c_model, c_curve_all, c_page):
+    from vjm_pin.cli.view import branch_frames
+    from vjm_pin.solver import EquilibriumSolver
+
+    _, cp = c_page
+    frames, k = list(cp.curve_frames), cp.critical_frame
+    branches = branch_frames(c_model, c_curve_all, frames)
+    assert len(branches) >= 1 and cp.branches == len(branches)
+    unstable = EquilibriumSolver(c_model, follow_stable=False)
+    for b in branches:
+        shown = [i for i, q in enumerate(b.frames) if q is not None]
+        assert len(shown) > len(frames) // 3 and min(shown) >= k  # from the critical point on
+        for i in shown[:: max(1, len(shown) // 5)]:
+            assert not b.stable[i]
+            eq = unstable.solve(frames[i].deflection * COMPRESS, x0=b.frames[i])
+            assert eq.converged and eq.stable is False
+            np.testing.assert_allclose(eq.x, b.frames[i], atol=1e-6)
+        # far past the critical point it is another configuration than the followed branch
+        assert (
+            np.linalg.norm(_joints(c_model, b.frames[-1]) - _joints(c_model, frames[-1].x)) > 0.05
+        )
+
+
+def test_curve_page_setup_slider_legend_labels(c_page, c_curve_all):
+    path, cp = c_page
+    setup = _page_setup(path.read_text(encoding="utf-8"))
+    frames = cp.curve_frames
+    n = cp.frames
+    assert setup["nframes"] == n and len(setup["labels"]) == n
+    # the load slider is in mm of deflection, one value per frame, increasing
+    sl = setup["slider"]
+    assert sl["unit"] == "mm" and len(sl["values"]) == n
+    np.testing.assert_allclose(
+        sl["values"][-len(frames) :], [f.deflection * 1e3 for f in frames], rtol=1e-12
+    )
+    assert np.all(np.diff(sl["values"]) > 0)
+    # legend: stable, unstable (the other branch), critical, force
+    texts = " ".join(e["text"] for e in setup["legend"])
+    for word in ("stable", "unstable", "critical", "force"):
+        assert word in texts
+    # the critical label names the force in N; the force labels follow the frames' forces
+    crit = next(a for a in setup["anchors"] if a["cls"] == "critical")
+    f_cr = float(crit["text"][0].split("F_cr = ")[1].split(" N")[0])
+    assert f_cr == pytest.approx(abs(c_curve_all.critical[0].force), rel=1e-3)
+    force = next(a for a in setup["anchors"] if a["cls"] == "force")
+    k = cp.critical_frame
+    shown_f = float(force["text"][k].split("F = ")[1].split(" N")[0])
+    assert shown_f == pytest.approx(
+        np.linalg.norm(frames[k - (n - len(frames))].wrench[:3]), rel=1e-2
+    )
+
+
+# ----------------------------------------------------------------------------- load path
+def test_view_wrench_frames_are_equilibria_along_the_load_path(tmp_path, capsys):
+    """``view ur5 --wrench``: every frame is the equilibrium under its own share of the load
+    (re-solved from the unloaded robot, independently of the warm-started path), and its
+    label and slider value give that load in N."""
+    from vjm_pin.cli import main
+    from vjm_pin.registry import resolve_model
+    from vjm_pin.solver import EquilibriumSolver
+
+    page = tmp_path / "ur5.html"
+    w = np.array([0.0, 0.0, -300.0, 0.0, 0.0, 0.0])
+    assert main(["view", "ur5", "--wrench", *map(str, w[:3]), "--html", str(page)]) == 0
+    capsys.readouterr()
+    setup = _page_setup(page.read_text(encoding="utf-8"))
+    n = setup["nframes"]
+    assert n >= 11
+    vm = resolve_model("ur5")
+    solver = EquilibriumSolver(vm)
+    ts = np.linspace(0.0, 1.0, n)
+    for k in (3, n // 2, n - 1):
+        cold = solver.solve_wrench(ts[k] * w)
+        shown = float(setup["labels"][k].split("|F| = ")[1].split(" N")[0])
+        assert shown == pytest.approx(ts[k] * 300.0, rel=1e-3)
+        assert setup["slider"]["values"][k] == pytest.approx(ts[k] * 300.0, rel=1e-6)
+        dmm = float(setup["labels"][k].split("|δ| = ")[1].split(" mm")[0])
+        assert dmm == pytest.approx(np.linalg.norm(cold.deflection[:3]) * 1e3, rel=1e-3)
+    # the frames themselves (API): configurations equal the independent solves
+    from vjm_pin.cli.view import load_path
+
+    ts2, path = load_path(vm, w, "wrench", n=5)
+    for t, eq in zip(ts2, path):
+        np.testing.assert_allclose(eq.wrench, t * w, atol=1e-3)
+        np.testing.assert_allclose(eq.x, solver.solve_wrench(t * w).x, atol=1e-7)
+
+
+def test_view_deflection_frames_label_their_true_force(tmp_path, capsys):
+    """paper-a-s: the old page labelled linear joint-space interpolations "load ×t"; now
+    each frame's label gives the force of the equilibrium at t·δ, solved independently."""
+    from vjm_pin.cli import main
+    from vjm_pin.registry import resolve_model
+    from vjm_pin.solver import EquilibriumSolver
+
+    page = tmp_path / "a.html"
+    d = np.array([-0.003, 0.0, 0.0])
+    assert main(["view", "paper-c-s", "--deflection", *map(str, d), "--html", str(page)]) == 0
+    capsys.readouterr()
+    setup = _page_setup(page.read_text(encoding="utf-8"))
+    n = setup["nframes"]
+    vm = resolve_model("paper-c-s")
+    solver = EquilibriumSolver(vm)
+    ts = np.linspace(0.0, 1.0, n)
+    forces = []
+    for k in range(1, n):
+        shown = float(setup["labels"][k].split("|F| = ")[1].split(" N")[0])
+        forces.append(shown)
+        if k % 5 == 0:
+            eq = solver.solve(ts[k] * d)
+            assert shown == pytest.approx(np.linalg.norm(eq.wrench[:3]), rel=2e-3)
+        assert setup["slider"]["values"][k] == pytest.approx(ts[k] * 3.0, rel=1e-6)  # mm
+    assert "unloaded" in setup["labels"][0]
+
+
+# ----------------------------------------------------------------------------- browser: models
+CELL = (480, 360)  # pixels of each picture of the grid screenshot
+
+
+def _marker_masks(img: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels of the force arrow (yellow) and the critical marker (magenta)."""
+    r, g, b = (img[..., i].astype(int) for i in range(3))
+    return (r > 180) & (g > 150) & (b < 90), (r > 160) & (b > 160) & (g < 90)
+
+
+def _assert_in_frame(img: np.ndarray, what: str, min_span: float = 0.6) -> None:
+    """The robot is there; it, its force arrow and marker span a good part of the picture;
+    none of them is cut at the borders."""
+    green, red = _colour_masks(img)
+    robot = green | red
+    scene = robot | np.logical_or(*_marker_masks(img))
+    h, w = robot.shape
+    assert robot.sum() > 800, f"{what}: robot not visible ({robot.sum()} pixels)"
+    rows, cols = np.nonzero(scene.any(axis=1))[0], np.nonzero(scene.any(axis=0))[0]
+    span = max((cols.max() - cols.min()) / w, (rows.max() - rows.min()) / h)
+    assert span > min_span, f"{what}: robot spans only {span:.0%} of the picture"
+    edge = np.zeros_like(scene)
+    edge[:3], edge[-3:], edge[:, :3], edge[:, -3:] = True, True, True, True
+    assert (scene & edge).sum() < 10, (
+        f"{what}: cut at the border ({(scene & edge).sum()} pixels there)"
+    )
+
+
+@pytest.fixture(scope="module")
+def model_shots(c_page, tmp_path_factory):
+    """One Chromium run: the paper chain's curve page (with its other branch) around the
+    critical frame, and ``view ur5 --wrench 0 0 -300`` unloaded and loaded."""
+    browser = chromium()
+    if browser is None:
+        pytest.skip("no chromium binary on PATH (apt-get install chromium)")
+    from vjm_pin.cli import main
+
+    tmp = tmp_path_factory.mktemp("shots")
+    ur5 = tmp / "ur5.html"
+    assert main(["view", "ur5", "--wrench", "0", "0", "-300", "--html", str(ur5)]) == 0
+    n_ur5 = _page_setup(ur5.read_text(encoding="utf-8"))["nframes"]
+    path, cp = c_page
+    k, last = cp.critical_frame, cp.frames - 1
+    shots = {("c", i): (path, i) for i in (k - 6, k - 3, k, k + 3, last)}
+    shots[("ur5", 1)] = (ur5, n_ur5 - 1)  # one ur5 picture: its page is large (meshes)
+    return screenshot_grid(browser, shots, tmp, cell=CELL), k, last
+
+
+def test_browser_paper_chain_curve_buckling(model_shots):
+    img, k, last = model_shots
+    c = {i: a for (m, i), a in img.items() if m == "c"}
+    for i, a in c.items():
+        _assert_in_frame(a, f"paper chain frame {i}")
+    green = {i: _colour_masks(a)[0] for i, a in c.items()}
+    red = {i: _colour_masks(a)[1] for i, a in c.items()}
+    # the critical frame differs visibly from its successor: the silhouette of the stable
+    # robot changes much more across the critical point than over as many pre-critical frames
+    across = (green[k] ^ green[k + 3]).sum()
+    before = (green[k - 6] ^ green[k - 3]).sum()
+    assert across > 3 * before + 150, (before, across)
+    # the critical marker is visible (not hidden under the end sphere) on every frame
+    for i, a in c.items():
+        assert _marker_masks(a)[1].sum() > 150, f"frame {i}: no critical marker"
+    # the other branch (the straight column, unstable past the critical point) is red
+    assert red[last].sum() > 400 and red[k - 3].sum() < 50, (red[k - 3].sum(), red[last].sum())
+
+
+def test_browser_ur5_wrench_in_frame(model_shots):
+    img, _, _ = model_shots
+    u1 = img[("ur5", 1)]
+    _assert_in_frame(u1, "ur5 under 300 N")
+    assert _marker_masks(u1)[0].sum() > 100  # its force arrow is drawn
+
+
+def test_all_branches_needs_curve(tmp_path, capsys):
+    from vjm_pin.cli import main
+
+    out = tmp_path / "x.html"
+    assert (
+        main(
+            [
+                "view",
+                PAPER,
+                "--deflection",
+                "-0.001",
+                "0",
+                "0",
+                "--all-branches",
+                "--html",
+                str(out),
+            ]
+        )
+        == 2
+    )
+    err = capsys.readouterr().err
+    assert err.startswith("vjm-pin: error:") and "--all-branches" in err and err.count("\n") == 1
+    assert not out.exists()

@@ -12,11 +12,20 @@ Scene layout (meshcat paths, all under ``/meshcat/vjm``)
     static intrinsic transform (mesh scale, Y→Z axis fix of three.js cylinders/cones).
 ``ghost/<geometry>``
     A semi-transparent copy of the robot at a fixed configuration (e.g. the unloaded one).
+``branch<i>/<geometry>``
+    Other equilibrium branches (:class:`Branch`, e.g. the unstable ones that leave a critical
+    point): a second animated robot each, coloured by its own stability, hidden (boolean
+    ``visible`` track) on frames where the branch has no equilibrium.
 ``force``
-    An arrow (shaft + cone head) at the end frame, along the applied force, whose length is
-    proportional to the force magnitude of the current frame; hidden when the force is zero.
+    The force arrow, drawn outside the robot: along the force, its length proportional to
+    the force magnitude of the current frame (hidden when zero). ``arrow_style="tail"``
+    starts it just beyond the load point (a pull); ``"head"`` ends it just short of the load
+    point (a push seen from outside); ``"auto"`` takes ``"tail"`` unless that arrow would run
+    along or through a link on some frame. Its value in N is a label in the page.
 ``critical``
-    A sphere at the end-frame position of the critical (first unstable / bifurcation) frame.
+    A ring (unlit magenta, facing the camera, larger than whatever sits at the end point) around
+    the end-frame position of the critical frame, and a pin above it carrying the label
+    (``critical_label``, e.g. the critical force in N).
 
 Per-frame stability colour
 --------------------------
@@ -42,9 +51,17 @@ asynchronously), so no server process is needed and a script can act after the s
 complete. That script
 
 - shows an overlay (top left) with the title and the label of the current frame
-  (``frame_labels`` or: frame number, force magnitude in N, stable / UNSTABLE);
+  (``frame_labels`` or: frame number, force magnitude in N, stable / UNSTABLE), labels pinned
+  to scene points (the force in N at the arrow, the critical point at its pin; projected with
+  the camera every frame) and a legend (bottom left); font sizes follow the viewport (vmin);
+- has a load slider (bottom right) in physical units (``slider``: e.g. |F| in N, δ in mm; a
+  value picks the frame whose value is nearest), a play/pause button and a "PNG" button
+  that saves the picture *with* its labels and legend (the WebGL canvas composited with the
+  overlay; meshcat's own image export loses them); ``window.vjmSnapshot(callback)`` does the
+  same for scripts;
 - reads the URL fragment: ``page.html#frame=12`` (frame index, may be fractional) or
   ``page.html#t=1.2`` (seconds) pauses the player at that time; ``hashchange`` works too;
+  ``&hud=0`` hides labels, legend and controls (the scene alone);
 - exposes ``window.vjmSeekFrame(k)`` and ``window.vjmSeekTime(t)`` for scripting.
 
 Without a fragment the animation plays in a loop; meshcat's own controls ("Open Controls" →
@@ -52,11 +69,17 @@ Animations: play/pause/reset, time slider, time scale) are there as usual.
 
 Camera
 ------
-meshcat's orbit controls always look at the world origin, and commands cannot reach their
-target. So the scene is moved instead: ``/meshcat/vjm``, ``/Grid`` and ``/Axes`` are translated
-by minus the centre of the bounding box of all joint origins, end-frame positions and arrow
-tips over all frames. The camera (40° field of view) is put along ``camera_direction`` at a
-distance that fits that box.
+The direction (``camera_direction``, default :func:`auto_camera_direction`) looks across the
+plane where the robot and its motion lie, from 20–65° above the floor. The points to frame
+are the corners of every geometry's bounding box, the joint origins, the arrows and the
+marker over all frames (and the branches and the ghost). meshcat's orbit controls look at
+the world origin and commands cannot reach their target, so the scene is shifted:
+``/meshcat/vjm``, ``/Grid`` and ``/Axes`` are translated by minus the centre of those points'
+bounding box; the grid is the floor (z = 0, or the robot's lowest point if lower) with cells
+of a 1-2-5 size near a sixth of the scene. The exported page's script then fits the camera
+exactly: it aims the orbit target at the middle of the points as seen from the camera
+direction and sets the distance so that they fill 85 % of the window (whatever its aspect),
+again whenever the canvas changes size. The live server's page gets a bounding-sphere fit.
 
 Live server
 -----------
@@ -78,6 +101,7 @@ import math
 import os
 import warnings
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -96,6 +120,8 @@ __all__ = [
     "STYLE_COLORS",
     "UNSTABLE_COLOR",
     "Animation",
+    "Branch",
+    "auto_camera_direction",
     "chain_geometry",
     "default_scale",
     "export_html",
@@ -124,8 +150,8 @@ GHOST_COLOR = (0.65, 0.67, 0.75, 0.3)
 """The ghost robot (translucent grey-blue)."""
 FORCE_COLOR = (1.0, 0.85, 0.0, 1.0)
 """The force arrow (yellow)."""
-CRITICAL_COLOR = (0.9, 0.0, 0.9, 0.75)
-"""The critical-frame marker (translucent magenta)."""
+CRITICAL_COLOR = (0.95, 0.0, 0.95, 1.0)
+"""The critical-point marker (magenta ring and pin, unlit)."""
 
 JOINT_MARKER_PREFIX = "joint:"
 """Geometry objects whose name starts with this keep their colour in stability colouring."""
@@ -396,7 +422,172 @@ def _translation(p: Sequence[float]) -> np.ndarray:
     return m
 
 
+def _local_box(go: pin.GeometryObject) -> np.ndarray:
+    """(8, 3) corners of the local bounding box of a geometry object (its own frame, m);
+    the origin alone when the shape gives none."""
+    try:
+        g = go.geometry
+        g.computeLocalAABB()
+        lo = np.asarray(g.aabb_local.min_, float)
+        hi = np.asarray(g.aabb_local.max_, float)
+        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+            raise ValueError
+    except Exception:  # noqa: BLE001 - a shape without a box is shown by its origin
+        return np.zeros((1, 3))
+    return np.array(
+        [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+    )
+
+
+def _segment_distances(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distance of each of ``points`` (m, 3) to the segment a–b."""
+    ab = b - a
+    L2 = float(ab @ ab)
+    if L2 <= 0:
+        return np.linalg.norm(points - a, axis=1)
+    t = np.clip((points - a) @ ab / L2, 0.0, 1.0)
+    return np.linalg.norm(points - (a + t[:, None] * ab), axis=1)
+
+
+def _distances_to_links(
+    points: np.ndarray,
+    joints: np.ndarray,
+    model: pin.Model,
+    end: tuple[int, np.ndarray] | None = None,
+) -> np.ndarray:
+    """Distance from each of ``points`` to the polyline of the kinematic tree (joint
+    origins ``joints``, parent to child, and ``end`` = (parent joint, position) of the end
+    frame), m."""
+    segments = [(joints[model.parents[j]], joints[j]) for j in range(1, model.njoints)]
+    if end is not None:
+        segments.append((joints[end[0]], np.asarray(end[1], float)))
+    best = np.full(len(points), math.inf)
+    for a, b in segments:
+        best = np.minimum(best, _segment_distances(points, a, b))
+    return best
+
+
+def _thin_points(pts: np.ndarray, voxel: float, cap: int = 3000) -> np.ndarray:
+    """One point per ``voxel``-sized cell; at most ``cap`` points, always keeping the
+    extreme points along the axes and the diagonals (what the camera must frame)."""
+    keys = np.round(pts / max(voxel, 1e-12))
+    _, idx = np.unique(keys, axis=0, return_index=True)
+    out = pts[np.sort(idx)]
+    if len(out) > cap:
+        dirs = np.array(
+            [
+                [x, y, z]
+                for x in (-1, 0, 1)
+                for y in (-1, 0, 1)
+                for z in (-1, 0, 1)
+                if (x, y, z) != (0, 0, 0)
+            ],
+            float,
+        )
+        proj = out @ dirs.T
+        keep = set(np.argmax(proj, axis=0).tolist())
+        keep.update(np.linspace(0, len(out) - 1, cap - len(keep)).astype(int).tolist())
+        out = out[sorted(keep)]
+    return out
+
+
+def auto_camera_direction(
+    frame_joints: Sequence[np.ndarray],
+    points: np.ndarray,
+    min_elevation: float = 20.0,
+    max_elevation: float = 65.0,
+) -> np.ndarray:
+    """A camera direction (unit 3-vector, from the look-at point to the camera) that sees
+    both the robot and its motion broadside, from above the floor.
+
+    The direction of least spread of ``points`` (the robot over all frames) plus the least
+    spread of the joint motion (displacements from the first frame), each normalised by its
+    trace, is the normal of the plane where things happen; it is then tilted to an
+    elevation between ``min_elevation`` and ``max_elevation`` degrees above the floor, on the
+    side of the (0.45, −1, 0.45) default view.
+    """
+    pts = np.asarray(points, float)
+    c = np.cov((pts - pts.mean(axis=0)).T) if len(pts) > 1 else np.zeros((3, 3))
+    total = np.trace(c)
+    cov = c / total if total > 0 else np.zeros((3, 3))
+    if len(frame_joints) > 1:
+        d = np.vstack([np.asarray(j) - np.asarray(frame_joints[0]) for j in frame_joints[1:]])
+        m = d.T @ d
+        if np.trace(m) > 0:
+            cov = cov + m / np.trace(m)
+    ref = np.array([0.45, -1.0, 0.45])
+    if not np.any(cov):
+        v = ref
+    else:
+        _, vecs = np.linalg.eigh(cov)
+        v = vecs[:, 0]
+    v = v / np.linalg.norm(v)
+    if v @ ref < 0:
+        v = -v
+    h = v[:2].copy()
+    if np.linalg.norm(h) < 0.05:
+        h = ref[:2]
+    h = h / np.linalg.norm(h)
+    elev = math.degrees(math.asin(max(-1.0, min(1.0, abs(v[2])))))
+    elev = math.radians(min(max(elev, min_elevation), max_elevation))
+    return np.array([math.cos(elev) * h[0], math.cos(elev) * h[1], math.sin(elev)])
+
+
+def _torus(R: float, r: float, nu: int = 48, nv: int = 12) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices and triangles of a torus of radii R, r in the xy plane (normal z)."""
+    u = np.linspace(0, 2 * np.pi, nu, endpoint=False)
+    v = np.linspace(0, 2 * np.pi, nv, endpoint=False)
+    uu, vv = np.meshgrid(u, v, indexing="ij")
+    verts = np.stack(
+        [(R + r * np.cos(vv)) * np.cos(uu), (R + r * np.cos(vv)) * np.sin(uu), r * np.sin(vv)],
+        axis=-1,
+    ).reshape(-1, 3)
+    faces = []
+    for i in range(nu):
+        for j in range(nv):
+            a, b = i * nv + j, ((i + 1) % nu) * nv + j
+            c, d = ((i + 1) % nu) * nv + (j + 1) % nv, i * nv + (j + 1) % nv
+            faces += [[a, b, c], [a, c, d]]
+    return verts, np.array(faces)
+
+
+def _flat_material(rgba: Sequence[float]):
+    """Unlit material: a marker in one flat colour, whatever the light."""
+    import meshcat.geometry as mg
+
+    return mg.MeshBasicMaterial(color=_rgb_int(rgba))
+
+
+def _css(rgba: Sequence[float]) -> str:
+    r, g, b = (round(255 * min(max(float(c), 0.0), 1.0)) for c in rgba[:3])
+    a = float(rgba[3]) if len(rgba) > 3 else 1.0
+    return f"rgba({r}, {g}, {b}, {a:g})"
+
+
+def _nice(x: float) -> float:
+    """Largest 1-2-5 number not above ``x`` (> 0)."""
+    exp = math.floor(math.log10(x))
+    mant = x / 10**exp
+    return max(m for m in (1.0, 2.0, 5.0) if m <= mant + 1e-12) * 10**exp
+
+
 # ============================================================================ the animation
+@dataclass(frozen=True)
+class Branch:
+    """Another equilibrium branch, shown as a second robot that follows the animation.
+
+    Attributes:
+        frames: One entry per animation frame: the (nq,) configuration on this branch at
+            that frame's load, or None where the branch has no equilibrium (hidden).
+        stable: One stability flag per frame (green / red); ignored where hidden.
+        name: Short text for the legend and the labels (e.g. ``"branch 1"``).
+    """
+
+    frames: tuple
+    stable: tuple
+    name: str = ""
+
+
 class Animation:
     """A meshcat scene with an animated robot, built from plain Pinocchio objects.
 
@@ -417,7 +608,7 @@ class Animation:
         Per-frame force at ``frame_name``, each a 3-vector in world axes (N) (a 6-vector is
         read as a wrench, linear part first), or None for no arrow.
     frame_name
-        End frame: where the force arrow starts and the critical marker sits. Required with
+        End frame: where the force acts and the critical marker sits. Required with
         ``forces`` or ``critical_index``.
     critical_index
         Index into ``frames`` of the critical frame, or None.
@@ -431,12 +622,29 @@ class Animation:
         Length of the arrow for the largest force magnitude, m. Default: 30 % of the size of
         the robot's bounding box over all frames.
     camera_direction
-        Direction from the look-at point to the camera, world axes (any length).
+        Direction from the look-at point to the camera, world axes (any length), or None
+        for :func:`auto_camera_direction` (from above the floor, across the motion).
     recolor
         Predicate on geometry-object names: which objects take the stability colour.
         Default: all but the joint markers of :func:`chain_geometry`.
     loop
         Play the animation in a loop (else once, then back to the start).
+    branches
+        Other equilibrium branches (:class:`Branch`), each drawn as a second robot coloured
+        by its own stability, visible on the frames where it exists.
+    critical_label
+        Text of the label pinned to the critical marker (default ``"critical point"``).
+    arrow_style
+        ``"tail"``: the arrow starts at the load point and points along the force (a pull);
+        ``"head"``: it ends at the load point (a push, drawn from outside); ``"auto"``
+        (default): ``"tail"`` unless that arrow would run through the robot on some frame.
+    slider
+        ``{"name": "|F|", "unit": "N", "values": [...]}``: one value per frame of a
+        quantity to scrub the animation with in the exported page (a range input in those
+        units; a value picks the frame whose value is nearest). Default: the force
+        magnitude in N when ``forces`` are given.
+    legend
+        Show the legend (stable / unstable / critical / force / unloaded) in the page.
 
     Raises
     ------
@@ -461,9 +669,14 @@ class Animation:
         title_text: str = "",
         frame_labels: Sequence[str] | None = None,
         arrow_length: float | None = None,
-        camera_direction: Sequence[float] = (0.45, -1.0, 0.45),
+        camera_direction: Sequence[float] | None = None,
         recolor: Callable[[str], bool] | None = None,
         loop: bool = True,
+        branches: Sequence[Branch] | None = None,
+        critical_label: str | None = None,
+        arrow_style: str = "auto",
+        slider: Mapping[str, Any] | None = None,
+        legend: bool = True,
     ) -> None:
         self.model = model
         self.visual_model = visual_model
@@ -513,10 +726,11 @@ class Animation:
             if len(frame_labels) != n:
                 raise InputError(f"frame_labels has {len(frame_labels)} entries, expected {n}")
         self.frame_labels = frame_labels if frame_labels is not None else self._default_labels()
-        cam = np.asarray(camera_direction, dtype=float).ravel()
-        if cam.size != 3 or not np.all(np.isfinite(cam)) or np.linalg.norm(cam) < _TOL:
-            raise InputError("camera_direction must be a non-zero 3-vector")
-        self.camera_direction = cam / np.linalg.norm(cam)
+        self._camera_given = camera_direction
+        if camera_direction is not None:
+            cam = np.asarray(camera_direction, dtype=float).ravel()
+            if cam.size != 3 or not np.all(np.isfinite(cam)) or np.linalg.norm(cam) < _TOL:
+                raise InputError("camera_direction must be a non-zero 3-vector")
         self.recolor = (
             recolor
             if recolor is not None
@@ -524,6 +738,39 @@ class Animation:
         )
         self.loop = bool(loop)
         self.arrow_length = arrow_length
+        self.branches: list[Branch] = []
+        for bi, br in enumerate(branches or ()):
+            bf, bs = list(br.frames), [bool(s) for s in br.stable]
+            if len(bf) != n or len(bs) != n:
+                raise InputError(
+                    f"branches[{bi}] has {len(bf)} frames and {len(bs)} flags, expected {n} each"
+                )
+            bf = [
+                None if q is None else self._check_q(q, f"branches[{bi}].frames[{k}]")
+                for k, q in enumerate(bf)
+            ]
+            self.branches.append(Branch(tuple(bf), tuple(bs), br.name or f"branch {bi + 1}"))
+        self.critical_label = "critical point" if critical_label is None else str(critical_label)
+        if arrow_style not in ("auto", "tail", "head"):
+            raise InputError(f"arrow_style must be 'auto', 'tail' or 'head', got {arrow_style!r}")
+        self._arrow_style_opt = arrow_style
+        if slider is None and forces is not None and n > 1:
+            slider = {
+                "name": "|F|",
+                "unit": "N",
+                "values": [float(np.linalg.norm(f)) for f in forces],
+            }
+        if slider is not None:
+            vals = [float(v) for v in slider["values"]]
+            if len(vals) != n or not all(math.isfinite(v) for v in vals):
+                raise InputError(f"slider values must be {n} finite numbers (one per frame)")
+            slider = {
+                "name": str(slider.get("name", "")),
+                "unit": str(slider.get("unit", "")),
+                "values": vals,
+            }
+        self.slider = slider
+        self.legend = bool(legend)
         self._compute_kinematics()
 
     # ------------------------------------------------------------------ inputs & kinematics
@@ -549,7 +796,7 @@ class Animation:
             out.append(" | ".join(parts))
         return out
 
-    def _placements(self, q: np.ndarray) -> tuple[list[np.ndarray], np.ndarray, np.ndarray | None]:
+    def _placements(self, q: np.ndarray):
         """Geometry placements (4×4), joint origins (njoints, 3), end-frame pose (4×4)."""
         pin.forwardKinematics(self.model, self._data, q)
         pin.updateGeometryPlacements(self.model, self._data, self.visual_model, self._gdata)
@@ -562,25 +809,48 @@ class Animation:
             )
         return oMg, joints, oMf
 
+    def _box_points(self, oMg: list[np.ndarray]) -> np.ndarray:
+        """Corners of every geometry's local bounding box, world axes (m)."""
+        pts = []
+        for m, box in zip(oMg, self._local_boxes):
+            pts.append(box @ m[:3, :3].T + m[:3, 3])
+        return np.vstack(pts) if pts else np.zeros((0, 3))
+
     def _compute_kinematics(self) -> None:
         self._data = self.model.createData()
         self._gdata = pin.GeometryData(self.visual_model)
+        self._local_boxes = [_local_box(go) for go in self.visual_model.geometryObjects]
         self._frame_oMg: list[list[np.ndarray]] = []
         self._frame_oMf: list[np.ndarray | None] = []
+        self._frame_joints: list[np.ndarray] = []
         pts = []
         for q in self.frames:
             oMg, joints, oMf = self._placements(q)
             self._frame_oMg.append(oMg)
             self._frame_oMf.append(oMf)
+            self._frame_joints.append(joints)
             pts.append(joints)
-            pts.extend(m[None, :3, 3] for m in oMg)
+            pts.append(self._box_points(oMg))
             if oMf is not None:
                 pts.append(oMf[None, :3, 3])
+        self._branch_oMg: list[list[list[np.ndarray] | None]] = []
+        for br in self.branches:
+            rows = []
+            for q in br.frames:
+                if q is None:
+                    rows.append(None)
+                    continue
+                oMg, joints, _ = self._placements(q)
+                rows.append(oMg)
+                pts.append(joints)
+                pts.append(self._box_points(oMg))
+            self._branch_oMg.append(rows)
         self._ghost_oMg = None
         if self.ghost_q is not None:
             oMg, joints, oMf = self._placements(self.ghost_q)
             self._ghost_oMg = oMg
             pts.append(joints)
+            pts.append(self._box_points(oMg))
             if oMf is not None:
                 pts.append(oMf[None, :3, 3])
         pts_arr = np.vstack(pts)
@@ -588,17 +858,182 @@ class Animation:
         self.scene_size = max(float(np.linalg.norm(hi - lo)), 1e-3)
         if self.arrow_length is None:
             self.arrow_length = 0.3 * self.scene_size
-        # arrow tips also need to be in view
-        if self.forces is not None:
-            fmax = max(float(np.linalg.norm(f)) for f in self.forces)
-            if fmax > 0:
-                tips = [
-                    oMf[:3, 3] + self.arrow_length * f / fmax
-                    for oMf, f in zip(self._frame_oMf, self.forces)
-                ]
-                pts_arr = np.vstack([pts_arr, np.array(tips)])
+        self.camera_direction = (
+            auto_camera_direction(self._frame_joints, pts_arr)
+            if self._camera_given is None
+            else np.asarray(self._camera_given, float).ravel()
+            / np.linalg.norm(np.asarray(self._camera_given, float))
+        )
+        self._layout_arrow()
+        self._layout_marker()
+        extra = [a[None, :] for a in self._arrow_ends] + [m[None, :] for m in self._marker_points]
+        pts_arr = np.vstack([pts_arr, *extra]) if extra else pts_arr
         lo, hi = pts_arr.min(axis=0), pts_arr.max(axis=0)
         self.bbox = (lo, hi)
+        self._view_points = _thin_points(pts_arr, 0.02 * self.scene_size)
+
+    # ------------------------------------------------------------------ arrow & marker layout
+    def _layout_arrow(self) -> None:
+        """Arrow placement per frame: base point, unit direction, length; style chosen so
+        the arrow stays outside the robot (see ``arrow_style``)."""
+        self._arrow_ends: list[np.ndarray] = []
+        self.arrow_style = None
+        if self.forces is None:
+            return
+        n = len(self.frames)
+        mags = [float(np.linalg.norm(f)) for f in self.forces]
+        fmax = max(mags)
+        L = float(self.arrow_length)
+        self._arrow_gap = 0.025 * self.scene_size
+        dirs, prev = [], np.array([0.0, 0.0, -1.0])
+        for k in range(n):
+            d = self.forces[k] / mags[k] if mags[k] > 0 else prev
+            prev = d
+            dirs.append(d)
+        lengths = [L * m / fmax if fmax > 0 else 0.0 for m in mags]
+        style = self._arrow_style_opt
+        if style == "auto":
+            style = "tail"
+            clear = 0.04 * self.scene_size
+            for k in range(n):
+                if lengths[k] <= 0:
+                    continue
+                p = self._frame_oMf[k][:3, 3]
+                along = np.linspace(0.2, 1.0, 9) * (lengths[k] + self._arrow_gap)
+                samples = p + np.outer(along, dirs[k])
+                end = (int(self.model.frames[self.frame_id].parentJoint), p)
+                dist = _distances_to_links(samples, self._frame_joints[k], self.model, end)
+                # through the robot: closer to a link than to the load point, and close
+                if np.any(dist < np.minimum(clear, 0.5 * along)):
+                    style = "head"
+                    break
+        self.arrow_style = style
+        self._arrow_dirs, self._arrow_lengths = dirs, lengths
+        # tail (start) of the drawn arrow, per frame
+        tails = []
+        for k in range(n):
+            p = self._frame_oMf[k][:3, 3]
+            if style == "tail":
+                tails.append(p + self._arrow_gap * dirs[k])
+            else:
+                tails.append(p - (self._arrow_gap + lengths[k]) * dirs[k])
+        self._arrow_tails = tails
+        for k in range(n):
+            if lengths[k] > 0:
+                self._arrow_ends += [tails[k], tails[k] + lengths[k] * dirs[k]]
+        # where the force label sits: on the middle of the arrow (the page lifts it above)
+        self._force_label_points = [t + 0.5 * lengths[k] * dirs[k] for k, t in enumerate(tails)]
+
+    def _layout_marker(self) -> None:
+        """The critical marker: a ring around the end point (larger than whatever sits
+        there) facing the camera, and a pin rising from it that carries the label."""
+        self._marker_points: list[np.ndarray] = []
+        if self.critical_index is None:
+            return
+        k = self.critical_index
+        p = self._frame_oMf[k][:3, 3]
+        r_end = 0.0
+        for m, box in zip(self._frame_oMg[k], self._local_boxes):
+            if np.linalg.norm(m[:3, 3] - p) < 1e-6 * self.scene_size + 1e-9:
+                r_end = max(r_end, 0.5 * float(np.max(box.max(axis=0) - box.min(axis=0))))
+        R = max(0.05 * self.scene_size, 1.8 * r_end)
+        self._ring = (p.copy(), R)
+        up = np.array([0.0, 0.0, 1.0])
+        self._pin_base = p + R * up
+        self._pin_top = p + (R + 0.12 * self.scene_size) * up
+        self._marker_points = [p + R * up, p - R * up, self._pin_top]
+        for ax in (np.array([1.0, 0, 0]), np.array([0, 1.0, 0])):
+            self._marker_points += [p + R * ax, p - R * ax]
+
+    def _center(self) -> np.ndarray:
+        lo, hi = self.bbox
+        return 0.5 * (lo + hi)
+
+    def floor_height(self) -> float:
+        """Height of the grid (m, world z): the world floor z = 0, or lower when the robot
+        reaches below it."""
+        return min(0.0, float(self.bbox[0][2]))
+
+    def page_setup(self) -> dict:
+        """What the exported page's script needs: labels, anchored labels, camera, legend."""
+        c = self._center()
+
+        def sh(p):
+            return [float(v) for v in (np.asarray(p, float) - c)]
+
+        anchors = []
+        n = len(self.frames)
+        if self.forces is not None:
+            anchors.append(
+                {
+                    "cls": "force",
+                    "pos": [sh(p) for p in self._force_label_points],
+                    "text": [
+                        f"F = {m:.3g} N" if m > 0 else ""
+                        for m in (float(np.linalg.norm(f)) for f in self.forces)
+                    ],
+                }
+            )
+        if self.critical_index is not None:
+            anchors.append(
+                {
+                    "cls": "critical",
+                    "pos": [sh(self._pin_top)] * n,
+                    "text": [self.critical_label] * n,
+                }
+            )
+        legend = []
+        if self.legend:
+            any_unstable = (self.stable is not None and not all(self.stable)) or any(
+                not s for br in self.branches for q, s in zip(br.frames, br.stable) if q is not None
+            )
+            if self.stable is not None or self.branches:
+                legend.append(
+                    {"shape": "box", "color": _css(STABLE_COLOR), "text": "stable equilibrium"}
+                )
+                if any_unstable or self.branches:
+                    legend.append(
+                        {
+                            "shape": "box",
+                            "color": _css(UNSTABLE_COLOR),
+                            "text": "unstable equilibrium",
+                        }
+                    )
+            if self.critical_index is not None:
+                legend.append(
+                    {"shape": "ring", "color": _css(CRITICAL_COLOR), "text": "critical point"}
+                )
+            if self.forces is not None:
+                legend.append(
+                    {
+                        "shape": "arrow",
+                        "color": _css(FORCE_COLOR),
+                        "text": "force on the end (length ∝ |F|)",
+                    }
+                )
+            if self.ghost_q is not None:
+                legend.append(
+                    {
+                        "shape": "box",
+                        "color": _css(GHOST_COLOR[:3] + (0.6,)),
+                        "text": "unloaded robot",
+                    }
+                )
+        return {
+            "fps": self.fps,
+            "nframes": n,
+            "labels": self.frame_labels,
+            "title": self.title_text,
+            "anchors": anchors,
+            "legend": legend,
+            "slider": self.slider,
+            "camera": {
+                "direction": [float(v) for v in self.camera_direction],
+                "fov": _CAMERA_FOV,
+                "points": [sh(p) for p in self._view_points],
+                "fill": 0.85,
+            },
+        }
 
     # ------------------------------------------------------------------ commands
     def commands(self) -> list[Any]:
@@ -637,7 +1072,20 @@ class Animation:
         def col(is_stable: bool) -> list[float]:
             return list((STABLE_COLOR if is_stable else UNSTABLE_COLOR)[:3])
 
-        # --- robot (animated) and ghost (static)
+        def color_track(obj_path: MPath, flags: list[bool]) -> None:
+            """Sharp colour switches (a key 1e-3 frame before each change holds the old one)."""
+            prop(obj_path, 0, "material.color", "color", col(flags[0]))
+            for k in range(1, n):
+                if flags[k] != flags[k - 1]:
+                    prop(obj_path, k - _EPS_FRAME, "material.color", "color", col(flags[k - 1]))
+                    prop(obj_path, k, "material.color", "color", col(flags[k]))
+            prop(obj_path, last, "material.color", "color", col(flags[last]))
+
+        def bool_track(path: MPath, name: str, flags: list[bool]) -> None:
+            for k in range(n):
+                prop(path, k, name, "boolean", bool(flags[k]))
+
+        # --- robot (animated), other branches (animated) and ghost (static)
         names = _node_names(self.visual_model)
         for gi, go in enumerate(self.visual_model.geometryObjects):
             conv = _meshcat_geometry(go)
@@ -656,29 +1104,48 @@ class Animation:
             if any(not np.allclose(m, mats[0], atol=1e-12) for m in mats[1:]):
                 track_transform(path, mats)
             if recol and len(set(self.stable)) > 1:
-                prop(obj_path, 0, "material.color", "color", col(self.stable[0]))
-                for k in range(1, n):
-                    if self.stable[k] != self.stable[k - 1]:
-                        prop(
-                            obj_path,
-                            k - _EPS_FRAME,
-                            "material.color",
-                            "color",
-                            col(self.stable[k - 1]),
-                        )
-                        prop(obj_path, k, "material.color", "color", col(self.stable[k]))
-                prop(obj_path, last, "material.color", "color", col(self.stable[last]))
+                color_track(obj_path, self.stable)
+            for bi, br in enumerate(self.branches):
+                shown = [q is not None for q in br.frames]
+                first = shown.index(True) if any(shown) else 0
+                # hidden frames hold the nearest shown pose (no flying in from elsewhere)
+                bm, prev = [], None
+                for k in range(n):
+                    m = self._branch_oMg[bi][k]
+                    if m is None:
+                        m = prev if prev is not None else self._branch_oMg[bi][first]
+                    if m is None:
+                        m = self._frame_oMg[k]
+                    bm.append(m[gi])
+                    prev = self._branch_oMg[bi][k] or prev
+                flags = [br.stable[k] if shown[k] else br.stable[first] for k in range(n)]
+                bpath = node(f"branch{bi}", names[gi])
+                b_rgba = (
+                    (STABLE_COLOR if flags[0] else UNSTABLE_COLOR)
+                    if self.recolor(go.name)
+                    else base_rgba
+                )
+                cmds.append(SetObject(_meshcat_geometry(go)[0], _material(b_rgba), bpath))
+                b_obj = MPath(bpath.entries + ("<object>",))
+                cmds.append(SetTransform(intrinsic, b_obj))
+                cmds.append(SetTransform(bm[0], bpath))
+                track_transform(bpath, bm)
+                if self.recolor(go.name) and len(set(flags)) > 1:
+                    color_track(b_obj, flags)
             if self._ghost_oMg is not None:
                 gpath = node("ghost", names[gi])
                 ghost_geom = _meshcat_geometry(go)[0]  # fresh uuids: no shared three.js objects
                 cmds.append(SetObject(ghost_geom, _material(GHOST_COLOR), gpath))
                 cmds.append(SetTransform(intrinsic, MPath(gpath.entries + ("<object>",))))
                 cmds.append(SetTransform(self._ghost_oMg[gi], gpath))
+        for bi, br in enumerate(self.branches):
+            shown = [q is not None for q in br.frames]
+            cmds.append(SetProperty("visible", shown[0], node(f"branch{bi}")))
+            if len(set(shown)) > 1:
+                bool_track(node(f"branch{bi}"), "visible", shown)
 
-        # --- force arrow: node "force" at the end frame with +y along F, shaft scaled along y
+        # --- force arrow: node "force" at the arrow's tail with +y along F, shaft scaled along y
         if self.forces is not None:
-            mags = [float(np.linalg.norm(f)) for f in self.forces]
-            fmax = max(mags)
             L = float(self.arrow_length)
             head_len, head_r, shaft_r = 0.2 * L, 0.07 * L, 0.025 * L
             fpath, spath, hpath = node("force"), node("force", "shaft"), node("force", "head")
@@ -700,53 +1167,85 @@ class Animation:
             )
             ey = np.array([0.0, 1.0, 0.0])
             mats, shaft_scale, head_scale, visible = [], [], [], []
-            prev_dir = ey
             for k in range(n):
                 m = np.eye(4)
-                m[:3, 3] = self._frame_oMf[k][:3, 3]
-                d = self.forces[k] / mags[k] if mags[k] > 0 else prev_dir
-                prev_dir = d
-                m[:3, :3] = pin.Quaternion.FromTwoVectors(ey, d).toRotationMatrix()
+                m[:3, 3] = self._arrow_tails[k]
+                m[:3, :3] = pin.Quaternion.FromTwoVectors(
+                    ey, self._arrow_dirs[k]
+                ).toRotationMatrix()
                 mats.append(m)
-                length = L * mags[k] / fmax if fmax > 0 else 0.0
+                length = self._arrow_lengths[k]
                 hs = min(1.0, length / (2.0 * head_len)) if head_len > 0 else 1.0
                 shaft_scale.append(max(length - hs * head_len, 1e-6))
                 head_scale.append(max(hs, 1e-6))
-                visible.append(bool(mags[k] > 0))
+                visible.append(bool(length > 0))
             cmds.append(SetTransform(mats[0], fpath))
-            track_transform(fpath, mats)
-            for k in range(n):
-                prop(spath, k, "scale", "vector3", [1.0, shaft_scale[k], 1.0])
-                prop(hpath, k, "position", "vector3", [0.0, shaft_scale[k], 0.0])
-                prop(hpath, k, "scale", "vector3", [head_scale[k]] * 3)
-                prop(fpath, k, "visible", "boolean", visible[k])
+            if n > 1:
+                track_transform(fpath, mats)
+                for k in range(n):
+                    prop(spath, k, "scale", "vector3", [1.0, shaft_scale[k], 1.0])
+                    prop(hpath, k, "position", "vector3", [0.0, shaft_scale[k], 0.0])
+                    prop(hpath, k, "scale", "vector3", [head_scale[k]] * 3)
+                bool_track(fpath, "visible", visible)
             cmds.append(SetProperty("scale", [1.0, shaft_scale[0], 1.0], spath))
             cmds.append(SetTransform(_translation([0.0, shaft_scale[0], 0.0]), hpath))
             cmds.append(SetProperty("scale", [head_scale[0]] * 3, hpath))
             cmds.append(SetProperty("visible", visible[0], fpath))
 
-        # --- critical marker
+        # --- critical marker: a ring (facing the camera) around the end point of the
+        # critical frame, larger than the end sphere, and a pin above it for the label
         if self.critical_index is not None:
-            p = self._frame_oMf[self.critical_index][:3, 3]
-            cpath = node("critical")
+            p, R = self._ring
+            mat = _flat_material(CRITICAL_COLOR)
+            verts, faces = _torus(R, 0.14 * R)
+            rot = pin.Quaternion.FromTwoVectors(
+                np.array([0.0, 0.0, 1.0]), self.camera_direction
+            ).toRotationMatrix()
+            ring = np.eye(4)
+            ring[:3, :3], ring[:3, 3] = rot, p
             cmds.append(
-                SetObject(mg.Sphere(0.03 * self.scene_size), _material(CRITICAL_COLOR), cpath)
+                SetObject(mg.TriangularMeshGeometry(verts, faces), mat, node("critical", "ring"))
             )
-            cmds.append(SetTransform(_translation(p), cpath))
+            cmds.append(SetTransform(ring, node("critical", "ring")))
+            h = float(np.linalg.norm(self._pin_top - self._pin_base))
+            stick = np.eye(4)
+            stick[:3, :3] = _Y_TO_Z[:3, :3]
+            stick[:3, 3] = 0.5 * (self._pin_base + self._pin_top)
+            cmds.append(
+                SetObject(
+                    mg.Cylinder(h, 0.05 * R),
+                    _flat_material(CRITICAL_COLOR),
+                    node("critical", "pin"),
+                )
+            )
+            cmds.append(SetTransform(stick, node("critical", "pin")))
+            cmds.append(
+                SetObject(
+                    mg.Sphere(0.3 * R), _flat_material(CRITICAL_COLOR), node("critical", "head")
+                )
+            )
+            cmds.append(SetTransform(_translation(self._pin_top), node("critical", "head")))
 
-        # --- camera. meshcat's orbit controls always look at the world origin (their target
-        # is not reachable by commands), so the scene is shifted instead: the robot, the grid
-        # and the axes are translated by -centre of the bounding box, and the camera sits at
-        # camera_direction * distance from the origin, with a 40° field of view.
+        # --- camera. meshcat's orbit controls look at the world origin (their target is not
+        # reachable by commands; the exported page's script sets it), so the scene is shifted
+        # instead: the robot, the grid and the axes are translated by -centre of the bounding
+        # box, and the camera sits at camera_direction * distance, with a 40° field of view.
+        # The grid is the floor (z = 0, or the robot's lowest point when it reaches below),
+        # with cells of a 1-2-5 size near a sixth of the scene.
         lo, hi = self.bbox
-        center = 0.5 * (lo + hi)
+        center = self._center()
         radius = max(0.5 * float(np.linalg.norm(hi - lo)), 0.05)
-        dist = 1.1 * radius / math.sin(math.radians(_CAMERA_FOV) / 2.0)
+        dist = 1.05 * radius / math.sin(math.radians(_CAMERA_FOV) / 2.0)
         off = dist * self.camera_direction
         shift = _translation(-center)
         cmds.append(SetTransform(shift, root))
-        cmds.append(SetTransform(shift, MPath(("Grid",))))
-        cmds.append(SetTransform(shift, MPath(("Axes",))))
+        cell = _nice(self.scene_size / 6.0)
+        grid = _translation(-center + np.array([0.0, 0.0, self.floor_height()]))
+        grid[:3, :3] *= cell / 0.5  # meshcat's grid: 20 m, 40 cells of 0.5 m
+        cmds.append(SetTransform(grid, MPath(("Grid",))))
+        axes = _translation(-center)
+        axes[:3, :3] *= 0.25 * self.scene_size  # meshcat's axes are 1 m long
+        cmds.append(SetTransform(axes, MPath(("Axes",))))
         cam = MPath(("Cameras", "default", "rotated", "<object>"))
         cmds.append(SetProperty("fov", _CAMERA_FOV, cam))
         # the camera lives in the frame "rotated" (y up): world (x, y, z) -> (x, z, -y)
@@ -779,12 +1278,7 @@ class Animation:
             base64.b64encode(umsgpack.packb(_plain(c.lower()))).decode("ascii")
             for c in self.commands()
         ]
-        setup = {
-            "fps": self.fps,
-            "nframes": len(self.frames),
-            "labels": self.frame_labels,
-            "title": self.title_text,
-        }
+        setup = self.page_setup()
         return _PAGE.format(
             title=html.escape(self.title_text or "vjm_pin"),
             main_js=main_js,
@@ -854,18 +1348,40 @@ _PAGE = """<!DOCTYPE html>
 <meta charset="utf-8">
 <title>{title}</title>
 <style>
-  body {{ margin: 0; }}
+  body {{ margin: 0; font-family: sans-serif; overflow: hidden; }}
+  #vjm-anchors {{ position: fixed; left: 0; top: 0; width: 100vw; height: 100vh; overflow: hidden;
+    pointer-events: none; }}
   #meshcat-pane {{ width: 100vw; height: 100vh; overflow: hidden; }}
-  #vjm-overlay {{ position: absolute; left: 8px; top: 8px; padding: 4px 8px;
-    font: 14px/1.35 sans-serif; color: #fff; background: rgba(0, 0, 0, 0.45);
-    border-radius: 4px; pointer-events: none; white-space: pre-wrap;
+  .vjm-box {{ position: absolute; padding: 0.3em 0.6em; color: #fff;
+    background: rgba(0, 0, 0, 0.5); border-radius: 0.3em; line-height: 1.35;
+    font-size: clamp(11px, 2.3vmin, 30px); }}
+  #vjm-overlay {{ left: 8px; top: 8px; pointer-events: none; white-space: pre-wrap;
     max-width: calc(100vw - 270px); }}  /* keep clear of meshcat's controls bar (top right) */
   #vjm-title {{ font-weight: bold; }}
+  #vjm-legend {{ left: 8px; bottom: 8px; pointer-events: none; font-size: clamp(10px, 2vmin, 26px); }}
+  .vjm-key {{ display: inline-block; width: 1.6em; height: 0.75em; margin-right: 0.5em;
+    vertical-align: middle; box-sizing: border-box; }}
+  #vjm-controls {{ right: 8px; bottom: 8px; display: flex; align-items: center; gap: 0.5em;
+    font-size: clamp(10px, 2vmin, 26px); }}
+  #vjm-controls button {{ font-size: inherit; }}
+  #vjm-slider {{ width: 28vw; }}
+  .vjm-anchor {{ position: absolute; transform: translate(-50%, -50%); pointer-events: none;
+    white-space: nowrap; font-size: clamp(10px, 2.1vmin, 28px); padding: 0.1em 0.4em;
+    border-radius: 0.3em; background: rgba(255, 255, 255, 0.88); color: #222;
+    border: 2px solid #888; display: none; }}
+  .vjm-anchor.critical {{ color: #90009a; border-color: #e000e0; font-weight: bold; }}
+  .vjm-anchor.force {{ color: #5a4a00; border-color: #e6c200; transform: translate(-50%, -160%); }}
+  .vjm-anchor.critical {{ transform: translate(-50%, -140%); }}
 </style>
 </head>
 <body>
 <div id="meshcat-pane"></div>
-<div id="vjm-overlay"><div id="vjm-title"></div><div id="vjm-label"></div></div>
+<div id="vjm-overlay" class="vjm-box"><div id="vjm-title" class="vjm-t"></div><div id="vjm-label" class="vjm-t"></div></div>
+<div id="vjm-anchors"></div>
+<div id="vjm-legend" class="vjm-box"></div>
+<div id="vjm-controls" class="vjm-box"><button id="vjm-play" title="play / pause">&#9199;</button>
+<input id="vjm-slider" type="range"><span id="vjm-value" class="vjm-t"></span>
+<button id="vjm-png" title="save the picture with its labels as PNG">PNG</button></div>
 <script>
 {main_js}
 </script>
@@ -885,6 +1401,7 @@ var viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));
 (function () {{
   var setup = {setup};
   var fps = setup.fps, n = setup.nframes, labels = setup.labels;
+  var pane = document.getElementById("meshcat-pane");
   document.getElementById("vjm-title").textContent = setup.title;
   if (!setup.title) document.getElementById("vjm-title").style.display = "none";
   var label = document.getElementById("vjm-label");
@@ -901,16 +1418,215 @@ var viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));
   }}
   window.vjmSeekTime = seekTime;
   window.vjmSeekFrame = function (k) {{ seekTime(k / fps); }};
+
+  // --- camera: look at the middle of the robot (all frames) and fill the window with it
+  function dot(a, b) {{ return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }}
+  function cross(a, b) {{
+    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+  }}
+  function unit(a) {{ var l = Math.sqrt(dot(a, a)); return [a[0] / l, a[1] / l, a[2] / l]; }}
+  function size() {{  // of the WebGL canvas (what the camera's aspect must match)
+    var el = viewer.renderer.domElement;
+    return [el.clientWidth || window.innerWidth, el.clientHeight || window.innerHeight];
+  }}
+  function fit() {{
+    var c = setup.camera, d = c.direction, pts = c.points;
+    var cam = viewer.camera, ctl = viewer.controls;
+    var sz = size(), w = sz[0], h = sz[1];
+    var f = [-d[0], -d[1], -d[2]];
+    var r = cross(f, [0, 0, 1]);
+    if (dot(r, r) < 1e-12) r = cross(f, [0, 1, 0]);
+    r = unit(r);
+    var u = cross(r, f);
+    var lr = Infinity, hr = -Infinity, lu = Infinity, hu = -Infinity;
+    for (var i = 0; i < pts.length; i++) {{
+      var pr = dot(pts[i], r), pu = dot(pts[i], u);
+      lr = Math.min(lr, pr); hr = Math.max(hr, pr); lu = Math.min(lu, pu); hu = Math.max(hu, pu);
+    }}
+    var cr = 0.5 * (lr + hr), cu = 0.5 * (lu + hu);
+    var ctr = [cr * r[0] + cu * u[0], cr * r[1] + cu * u[1], cr * r[2] + cu * u[2]];
+    var tv = Math.tan(c.fov * Math.PI / 360) * c.fill, th = tv * w / h;
+    var D = 1e-6;
+    for (var i = 0; i < pts.length; i++) {{
+      var q = [pts[i][0] - ctr[0], pts[i][1] - ctr[1], pts[i][2] - ctr[2]];
+      var qd = dot(q, d);
+      D = Math.max(D, qd + Math.abs(dot(q, r)) / th, qd + Math.abs(dot(q, u)) / tv);
+    }}
+    var p = [ctr[0] + D * d[0], ctr[1] + D * d[1], ctr[2] + D * d[2]];
+    // the camera and the orbit target live in the frame "rotated" (y up)
+    cam.position.set(p[0], p[2], -p[1]);
+    ctl.target.set(ctr[0], ctr[2], -ctr[1]);
+    cam.fov = c.fov; cam.aspect = w / h; cam.near = D / 200; cam.far = D * 200;
+    cam.updateProjectionMatrix();
+    ctl.update();
+    viewer.set_dirty();
+  }}
+  var fitted = "", anchors = null;
+  function refit() {{  // at start and whenever the canvas changes size
+    var sz = size().join("x");
+    if (sz !== fitted) {{ fitted = sz; fit(); }}
+  }}
+  refit();
+  window.vjmFitCamera = fit;
+  // refit inside meshcat's own render call, so no frame is drawn with a stale camera
+  var render = viewer.render.bind(viewer);
+  viewer.render = function () {{
+    refit();
+    render();
+    if (anchors) placeAnchors(frameAt(viewer.animator.time || 0));
+  }};
+
+  // --- legend
+  var legend = document.getElementById("vjm-legend");
+  if (!setup.legend.length) legend.style.display = "none";
+  setup.legend.forEach(function (e) {{
+    var row = document.createElement("div");
+    var key = document.createElement("span");
+    key.className = "vjm-key";
+    key.dataset.shape = e.shape; key.dataset.color = e.color;
+    if (e.shape === "ring") {{
+      key.style.border = "0.2em solid " + e.color; key.style.borderRadius = "50%";
+      key.style.width = "0.95em"; key.style.height = "0.95em"; key.style.margin = "0 1.15em 0 0.3em";
+    }} else if (e.shape === "arrow") {{
+      key.style.background = "linear-gradient(to right, " + e.color + " 70%, transparent 70%)";
+      key.style.height = "0.3em";
+      key.style.clipPath = "none";
+    }} else {{
+      key.style.background = e.color;
+    }}
+    var t = document.createElement("span");
+    t.className = "vjm-t"; t.textContent = e.text;
+    row.appendChild(key); row.appendChild(t); legend.appendChild(row);
+  }});
+
+  // --- labels pinned to points of the scene (force, critical point)
+  anchors = setup.anchors.map(function (a) {{
+    var el = document.createElement("div");
+    el.className = "vjm-anchor vjm-t " + a.cls;
+    document.getElementById("vjm-anchors").appendChild(el);
+    return {{ a: a, el: el }};
+  }});
+  var v3 = viewer.camera.position.clone();
+  function placeAnchors(k) {{
+    var cam = viewer.camera;
+    if (cam.updateWorldMatrix) cam.updateWorldMatrix(true, false); else cam.updateMatrixWorld(true);
+    var sz = size(), w = sz[0], h = sz[1];
+    anchors.forEach(function (o) {{
+      var p = o.a.pos[k], text = o.a.text[k];
+      v3.set(p[0], p[2], -p[1]);  // meshcat's z-up scene in three.js' y-up world
+      v3.project(cam);
+      if (!text || v3.z > 1) {{ o.el.style.display = "none"; return; }}
+      o.el.style.display = "block";
+      o.el.textContent = text;
+      o.el.style.left = ((v3.x + 1) / 2 * w) + "px";
+      o.el.style.top = ((1 - v3.y) / 2 * h) + "px";
+    }});
+  }}
+
+  // --- load slider (in the units of setup.slider) and play / pause
+  var slider = document.getElementById("vjm-slider"), value = document.getElementById("vjm-value");
+  var sl = setup.slider, dragging = false;
+  function fmt(x) {{ return parseFloat(x.toPrecision(4)).toString(); }}
+  if (sl && n > 1) {{
+    var lo = Math.min.apply(null, sl.values), hi = Math.max.apply(null, sl.values);
+    slider.min = lo; slider.max = hi; slider.step = (hi > lo) ? (hi - lo) / 1000 : 1;
+    slider.addEventListener("input", function () {{
+      dragging = true;
+      var x = parseFloat(slider.value), best = 0;
+      for (var k = 1; k < n; k++)
+        if (Math.abs(sl.values[k] - x) < Math.abs(sl.values[best] - x)) best = k;
+      window.vjmSeekFrame(best);
+    }});
+    slider.addEventListener("change", function () {{ dragging = false; }});
+  }} else {{
+    slider.style.display = "none";
+  }}
+  var play = document.getElementById("vjm-play");
+  if (n < 2) play.style.display = "none";
+  play.addEventListener("click", function () {{
+    var a = viewer.animator;
+    if (a.playing) a.pause(); else a.play();
+  }});
+
+  // --- PNG of the picture with its labels (the WebGL canvas alone would lose them)
+  function snapshot(done) {{
+    var img = new Image();
+    img.onload = function () {{
+      var cv = document.createElement("canvas");
+      cv.width = img.width; cv.height = img.height;
+      var s = img.width / size()[0], ctx = cv.getContext("2d");
+      ctx.drawImage(img, 0, 0);
+      var boxes = document.querySelectorAll(".vjm-box:not(#vjm-controls), .vjm-anchor, .vjm-key");
+      boxes.forEach(function (el) {{
+        var st = getComputedStyle(el);
+        if (st.display === "none" || st.visibility === "hidden") return;
+        var b = el.getBoundingClientRect();
+        if (el.dataset.shape === "ring" || el.dataset.shape === "arrow") {{
+          ctx.strokeStyle = el.dataset.color; ctx.fillStyle = el.dataset.color;
+          if (el.dataset.shape === "ring") {{
+            ctx.lineWidth = 0.2 * b.height * s; ctx.beginPath();
+            ctx.arc((b.left + b.width / 2) * s, (b.top + b.height / 2) * s, 0.4 * b.height * s, 0, 2 * Math.PI);
+            ctx.stroke();
+          }} else {{
+            ctx.fillRect(b.left * s, b.top * s, 0.7 * b.width * s, b.height * s);
+          }}
+          return;
+        }}
+        ctx.fillStyle = st.backgroundColor;
+        ctx.fillRect(b.left * s, b.top * s, b.width * s, b.height * s);
+        var bw = parseFloat(st.borderTopWidth);
+        if (bw > 0) {{
+          ctx.strokeStyle = st.borderTopColor; ctx.lineWidth = bw * s;
+          ctx.strokeRect(b.left * s, b.top * s, b.width * s, b.height * s);
+        }}
+      }});
+      document.querySelectorAll(".vjm-t").forEach(function (el) {{
+        var st = getComputedStyle(el);
+        if (st.display === "none" || st.visibility === "hidden" || !el.textContent) return;
+        if (el.closest("#vjm-controls")) return;
+        var b = el.getBoundingClientRect(), fs = parseFloat(st.fontSize);
+        var lh = parseFloat(st.lineHeight) || 1.35 * fs;
+        ctx.font = st.fontWeight + " " + fs * s + "px " + st.fontFamily;
+        ctx.fillStyle = st.color; ctx.textBaseline = "middle";
+        var pad = parseFloat(st.paddingLeft) || 0, pt = parseFloat(st.paddingTop) || 0;
+        el.innerText.split("\\n").forEach(function (line, i) {{
+          ctx.fillText(line, (b.left + pad) * s, (b.top + pt + (i + 0.5) * lh) * s);
+        }});
+      }});
+      done(cv.toDataURL("image/png"));
+    }};
+    img.src = viewer.capture_image();
+  }}
+  window.vjmSnapshot = snapshot;
+  document.getElementById("vjm-png").addEventListener("click", function () {{
+    snapshot(function (url) {{
+      var a = document.createElement("a");
+      a.href = url; a.download = "vjm-view.png"; document.body.appendChild(a); a.click(); a.remove();
+    }});
+  }});
+
   function fromHash() {{
     var h = new URLSearchParams(window.location.hash.replace(/^#/, ""));
     var k = parseFloat(h.get("frame")), t = parseFloat(h.get("t"));
+    var hud = h.get("hud") !== "0";  // #hud=0: the scene alone (no labels, legend, controls)
+    ["vjm-overlay", "vjm-legend", "vjm-controls", "vjm-anchors"].forEach(function (id) {{
+      document.getElementById(id).style.visibility = hud ? "" : "hidden";
+    }});
     if (isFinite(k)) window.vjmSeekFrame(k);
     else if (isFinite(t)) seekTime(t);
   }}
   window.addEventListener("hashchange", fromHash);
   fromHash();
   function update() {{
-    label.textContent = labels[frameAt(viewer.animator.time || 0)];
+    refit();
+    var k = frameAt(viewer.animator.time || 0);
+    label.textContent = labels[k];
+    placeAnchors(k);
+    if (sl && n > 1) {{
+      if (!dragging) slider.value = sl.values[k];
+      value.textContent = sl.name + " = " + fmt(sl.values[k]) + " " + sl.unit;
+    }}
+    play.innerHTML = viewer.animator.playing ? "&#10074;&#10074;" : "&#9654;";
     requestAnimationFrame(update);
   }}
   update();
@@ -967,7 +1683,8 @@ def export_html(
     title_text
         Title of the page and of its overlay.
     path
-        If given, the page is also written to this file (UTF-8).
+        If given, the page is also written to this file (UTF-8), atomically (a temporary
+        file renamed over ``path``); check it first with :func:`vjm_pin.outputs.check_output`.
     **options
         More :class:`Animation` keywords: ``frame_labels``, ``arrow_length`` (m),
         ``camera_direction``, ``recolor``, ``loop``.
@@ -992,7 +1709,10 @@ def export_html(
     )
     page = anim.to_html()
     if path is not None:
-        Path(path).write_text(page, encoding="utf-8")
+        from .outputs import atomic_output
+
+        with atomic_output(path, "w") as fh:  # no half page if interrupted
+            fh.write(page)
     return page
 
 

@@ -12,6 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .common import int_range, positive_float
+
 log = logging.getLogger(__name__)
 
 DEFAULT_STEPS = 60
@@ -23,12 +25,16 @@ def add_parser(sub):
         help="show the loaded robot, or animate it along a force-deflection curve, in meshcat",
         description=(
             "Show MODEL in meshcat: the unloaded robot ghosted, the loaded one solid (green: stable, "
-            "red: unstable), the force arrow at the end frame and, with --curve, an animation along the "
-            "traced force-deflection path with a marker at the critical point. Deformations (spring "
-            "deflections θ-θ0 and passive joint motion) are magnified by --scale for display; the page "
-            "states the scale. With --html the page is written to a file that plays offline "
-            "(append #frame=K to its URL to pause at frame K); without it a meshcat server is started "
-            "and serves until Ctrl-C."
+            "red: unstable), the force arrow (value in N) at the end frame. With --deflection/--wrench "
+            "the animation runs through true equilibria along the load path (each solved at its share "
+            "of the load, labelled with its force in N and deflection in mm); with --curve it follows "
+            "the traced force-deflection path, with frames dense around the critical points, a ring "
+            "marking the critical point and, with --all-branches, the other (unstable) branches in "
+            "red. Deformations (spring deflections θ-θ0 and passive joint motion) are magnified by "
+            "--scale for display; the page states the scale. With --html the page is written to a "
+            "file that plays offline, with a legend, a load slider (N or mm) and a PNG button (append "
+            "#frame=K to its URL to pause at frame K, &hud=0 to hide labels and controls); without it "
+            "a meshcat server is started and serves until Ctrl-C."
         ),
     )
     from .analyze import add_robot_options
@@ -53,25 +59,34 @@ def add_parser(sub):
     )
     p.add_argument(
         "--max-deflection",
-        type=float,
+        type=positive_float,
         metavar="M",
         help="with --curve: largest deflection along the direction (m)",
     )
     p.add_argument(
         "--steps",
-        type=int,
+        type=int_range(2),
         default=DEFAULT_STEPS,
         help=f"with --curve: number of curve steps (default {DEFAULT_STEPS})",
     )
     p.add_argument(
+        "--all-branches",
+        action="store_true",
+        help="with --curve: also trace the branches that leave each critical point and show "
+        "them as second robots (red where unstable)",
+    )
+    p.add_argument(
         "--scale",
-        type=float,
+        type=positive_float,
         default=None,
         metavar="S",
         help="deformation magnification (default: chosen so the deformation is visible)",
     )
     p.add_argument(
-        "--html", metavar="FILE", help="write a self-contained HTML page instead of serving"
+        "--html",
+        metavar="FILE.html",
+        help="write a self-contained HTML page instead of serving; never the model or springs "
+        "file; checked before the work starts, written atomically; an existing file is replaced",
     )
     p.add_argument(
         "--open",
@@ -82,33 +97,19 @@ def add_parser(sub):
 
 
 # ----------------------------------------------------------------------------- curves
-def trace(vm, direction: np.ndarray, max_deflection: float, steps: int = DEFAULT_STEPS):
-    """The force-deflection curve of ``vm`` along ``direction`` up to ``max_deflection`` (m)."""
+def trace(
+    vm, direction: np.ndarray, max_deflection: float, steps: int = DEFAULT_STEPS, all_branches: bool = False
+):
+    """The force-deflection curve of ``vm`` along ``direction`` up to ``max_deflection`` (m);
+    with ``all_branches`` also the branches that leave its critical points."""
     from ..solver.curve import trace_curve
 
-    return trace_curve(vm, direction, max_deflection, steps)
-
-
-@dataclass(frozen=True)
-class CurvePage:
-    """An exported curve animation.
-
-    Attributes:
-        html: The page.
-        scale: Deformation magnification used (dimensionless).
-        frames: Number of animation frames.
-        critical_frame: Frame index of the first critical point, or None.
-    """
-
-    html: str
-    scale: float
-    frames: int
-    critical_frame: int | None
+    return trace_curve(vm, direction, max_deflection, steps, all_branches=all_branches)
 
 
 def _label(deflection_m: float, force_n: float, stable) -> str:
     verdict = "stable" if stable in (True, None) else "UNSTABLE"
-    return f"δ = {deflection_m * 1e3:.3f} mm, |F| = {abs(force_n):.4g} N, {verdict}"
+    return f"δ = {deflection_m * 1e3:.4g} mm, |F| = {abs(force_n):.4g} N, {verdict}"
 
 
 def _scene(vm, frames_x, scale):
@@ -129,6 +130,343 @@ def robot_geometry(vm):
     return mesh_geometry(vm.model, vm.urdf) or chain_geometry(vm.model, vm.roles)
 
 
+# ----------------------------------------------------------------------------- curve frames
+DEFAULT_FRAMES = 91
+"""Animation frames of a curve page (about 6 s at 15 frames per second)."""
+W_DEFLECTION, W_FORCE = 0.5, 0.6
+"""Weights of the normalised deflection and force in the frame arc length (shape: 1)."""
+
+
+@dataclass(frozen=True, eq=False)  # identity: frames are looked up by object
+class CurveFrame:
+    """One animation frame of a curve: an equilibrium on the followed branch.
+
+    Attributes:
+        deflection: Deflection along the curve direction (m, or rad for a rotation).
+        force: Force along the direction, ``dᵀF`` (N or N·m).
+        wrench: (6,) external wrench at the end (N, N·m), world axes.
+        stable: Stability verdict (eq. 23) of the equilibrium.
+        x: (nq,) configuration (m, rad).
+        kind: ``"curve"`` (a point of the traced curve), ``"refined"`` (solved here, warm
+            started from a neighbouring point) or ``"critical"`` (the pre-critical state at
+            a critical point's deflection).
+    """
+
+    deflection: float
+    force: float
+    wrench: np.ndarray
+    stable: bool
+    x: np.ndarray
+    kind: str
+
+
+def _frame(eq, s: float, d: np.ndarray, kind: str) -> CurveFrame:
+    w = np.asarray(eq.wrench, float)
+    return CurveFrame(
+        float(s), float(d @ w), w, eq.stable is not False, np.asarray(eq.x, float), kind
+    )
+
+
+def _warm_solve(solver, s, d, start):
+    """Equilibrium at deflection ``s·d`` from the state ``start`` (one Newton attempt
+    first, the full solver if it fails), or None."""
+    from ..exceptions import NoEquilibrium
+
+    for fast in (True, False):
+        try:
+            eq = solver.solve(
+                s * d, x0=start.x, wrench0=start.wrench, raise_on_failure=False, fast_fail=fast
+            )
+        except NoEquilibrium:
+            eq = None
+        if eq is not None and eq.converged:
+            return eq
+    return None
+
+
+def _joint_positions(vm, data, x) -> np.ndarray:
+    import pinocchio as pin
+
+    pin.forwardKinematics(vm.model, data, np.asarray(x, float))
+    return np.array([m.translation for m in data.oMi[1:]])
+
+
+def curve_frames(vm, curve, n_frames: int = DEFAULT_FRAMES, solver=None):
+    """Animation frames along ``curve``, dense where something happens.
+
+    The frames are true equilibria, spaced uniformly in the arc length of the path
+    (deflection, force, shape) with each coordinate normalised by its range over the curve
+    (shape: the largest joint displacement between neighbours over the largest joint
+    displacement from the start). A steep pre-critical rise of the force and the fast
+    change of shape just past a critical point thus get as many frames as the long
+    post-critical plateau. Around each critical point the bracket is sampled first
+    (pre-critical states up to the critical deflection, post-critical ones solved backwards
+    from the first point after it), and the pre-critical state at the critical deflection is
+    always a frame (``kind="critical"``).
+
+    Args:
+        vm: The model.
+        curve: A :class:`vjm_pin.solver.curve.Curve` of ``vm``.
+        n_frames: Number of frames wanted (at least the number of critical points + 2).
+        solver: An :class:`~vjm_pin.solver.EquilibriumSolver` of ``vm`` (default: a new one).
+
+    Returns:
+        (frames, critical) — the :class:`CurveFrame` list in order of deflection and, per
+        critical point of ``curve``, the index of its ``"critical"`` frame (or None when its
+        state could not be solved).
+    """
+    from ..exceptions import InputError
+    from ..solver import EquilibriumSolver
+
+    if int(n_frames) != n_frames or n_frames < 2:
+        raise InputError(f"n_frames must be an integer >= 2, got {n_frames}")
+    solver = solver or EquilibriumSolver(vm)
+    d = np.asarray(curve.direction, float)
+    pts = list(curve.points)
+    samples = [_frame(p.equilibrium, p.deflection, d, "curve") for p in pts]
+    crit_samples: list[CurveFrame | None] = []
+    no_split = set()  # (s_lo, s_hi) of sample pairs across a critical point
+    for c in curve.critical:
+        i = int(c.index)
+        if not 1 <= i < len(pts):
+            crit_samples.append(None)
+            continue
+        a, b = pts[i - 1], pts[i]
+        s_cr = float(c.deflection)
+        prev, pre = a.equilibrium, []
+        for u in (0.5, 0.8, 0.95, 1.0 - 1e-4):
+            s = a.deflection + (s_cr - a.deflection) * u
+            eq = _warm_solve(solver, s, d, prev)
+            if eq is None:
+                break
+            pre.append(_frame(eq, s, d, "refined"))
+            prev = eq
+        cs = None
+        if pre and abs(pre[-1].deflection - s_cr) <= 1e-3 * max(
+            abs(s_cr), abs(b.deflection - a.deflection)
+        ):
+            cs = CurveFrame(
+                *[getattr(pre[-1], f) for f in ("deflection", "force", "wrench", "stable", "x")],
+                "critical",
+            )
+            pre[-1] = cs
+        crit_samples.append(cs)
+        prev, post = b.equilibrium, []
+        for u in (0.7, 0.45, 0.25, 0.12, 0.05, 0.02, 0.005):
+            s = s_cr + (b.deflection - s_cr) * u
+            eq = _warm_solve(solver, s, d, prev)
+            if eq is None or (eq.stable is not False) != (b.stable is not False):
+                break
+            post.append(_frame(eq, s, d, "refined"))
+            prev = eq
+        samples += pre + post
+        lo = pre[-1].deflection if pre else a.deflection
+        hi = min([p.deflection for p in post], default=b.deflection)
+        no_split.add((lo, hi))
+    samples.sort(key=lambda f: f.deflection)
+    dedup = [samples[0]]
+    for f in samples[1:]:
+        if f.deflection - dedup[-1].deflection > 1e-12 * max(1.0, abs(f.deflection)):
+            dedup.append(f)
+        elif f.kind == "critical":
+            dedup[-1] = f
+    samples = dedup
+    m = len(samples)
+    if m == 1:
+        return samples, [0 if cs is not None else None for cs in crit_samples]
+
+    data = vm.model.createData()
+    joints = [_joint_positions(vm, data, f.x) for f in samples]
+    s_arr = np.array([f.deflection for f in samples])
+    f_arr = np.array([f.force for f in samples])
+    rs = max(float(np.ptp(s_arr)), 1e-300)
+    rf = float(np.ptp(f_arr)) or 1.0
+    disp = max(float(np.linalg.norm(j - joints[0], axis=1).max()) for j in joints) or 1.0
+    seg = np.array(
+        [
+            np.sqrt(
+                (W_DEFLECTION * (s_arr[k + 1] - s_arr[k]) / rs) ** 2
+                + (W_FORCE * (f_arr[k + 1] - f_arr[k]) / rf) ** 2
+                + (float(np.linalg.norm(joints[k + 1] - joints[k], axis=1).max()) / disp) ** 2
+            )
+            for k in range(m - 1)
+        ]
+    )
+    arc = np.concatenate([[0.0], np.cumsum(seg)])
+    crit_arc = [arc[i] for i, f in enumerate(samples) if any(f is cs for cs in crit_samples)]
+    targets = list(np.linspace(0.0, arc[-1], int(n_frames)))
+    for ca in crit_arc:  # the critical states are frames themselves
+        j = int(np.argmin([abs(t - ca) for t in targets]))
+        targets[j] = ca
+    frames: list[CurveFrame] = []
+    for t in targets:
+        k = int(min(np.searchsorted(arc, t, side="right") - 1, m - 2))
+        u = (t - arc[k]) / seg[k] if seg[k] > 0 else 0.0
+        lo, hi = samples[k], samples[k + 1]
+        across = any(lo.deflection >= a and hi.deflection <= b for a, b in no_split) or (
+            lo.stable != hi.stable
+        )
+        if u <= 0.02 or u >= 0.98 or across:
+            f = lo if u < 0.5 else hi
+        else:
+            s = lo.deflection + u * (hi.deflection - lo.deflection)
+            eq = _warm_solve(solver, s, d, lo)
+            step = float(np.linalg.norm(hi.x - lo.x))
+            x_lin = lo.x + u * (hi.x - lo.x)
+            if (
+                eq is not None
+                and (eq.stable is not False) == lo.stable
+                and (np.linalg.norm(eq.x - x_lin) <= 2.0 * step + 1e-12)
+            ):
+                f = _frame(eq, s, d, "refined")
+            else:
+                f = lo if u < 0.5 else hi
+        if not frames or f.deflection != frames[-1].deflection:
+            frames.append(f)
+        elif f.kind == "critical":
+            frames[-1] = f
+    crit_idx = []
+    for cs in crit_samples:
+        crit_idx.append(next((i for i, f in enumerate(frames) if f is cs), None))
+    return frames, crit_idx
+
+
+def branch_frames(vm, curve, frames, solver=None):
+    """The other branches of ``curve`` (``Curve.branches``, traced with ``all_branches``)
+    at the deflections of ``frames``: per branch, one configuration per frame (None where
+    the branch does not reach that deflection) and one stability flag per frame.
+
+    Each configuration is an equilibrium solved at the frame's deflection with a solver that
+    does not prefer stable states, warm started from the nearest branch point, and kept
+    only if it stays on the branch (within two branch steps of that point). Frames before
+    the critical point a branch leaves are not shown.
+    """
+    from ..solver import EquilibriumSolver
+    from ..viewer import Branch
+
+    if not curve.branches:
+        return []
+    d = np.asarray(curve.direction, float)
+    unstable = EquilibriumSolver(vm, follow_stable=False)
+    crit_s = sorted(float(c.deflection) for c in curve.critical)
+    out = []
+    for bi, br in enumerate(curve.branches):
+        bs = np.array([p.deflection for p in br])
+        if bs.size == 0:
+            continue
+        start = max([s for s in crit_s if s <= bs[0] + 1e-15], default=bs[0])
+        step = max(
+            [
+                float(np.linalg.norm(br[k + 1].equilibrium.x - br[k].equilibrium.x))
+                for k in range(len(br) - 1)
+            ],
+            default=0.0,
+        )
+        qs, flags = [], []
+        for f in frames:
+            s = f.deflection
+            if s < start or s > bs[-1] * (1 + 1e-12) + 1e-15:
+                qs.append(None)
+                flags.append(False)
+                continue
+            k = int(np.argmin(np.abs(bs - s)))
+            near = br[k]
+            if abs(near.deflection - s) <= 1e-12 * max(1.0, abs(s)):
+                qs.append(np.asarray(near.equilibrium.x, float))
+                flags.append(near.stable is not False)
+                continue
+            eq = _warm_solve(unstable, s, d, near.equilibrium)
+            if eq is None or np.linalg.norm(eq.x - near.equilibrium.x) > 2.0 * step + 1e-9:
+                qs.append(None)
+                flags.append(False)
+                continue
+            qs.append(np.asarray(eq.x, float))
+            flags.append(eq.stable is not False)
+        if any(q is not None for q in qs):
+            out.append(Branch(tuple(qs), tuple(flags), f"branch {bi + 1}"))
+    return out
+
+
+def curve_animation(vm, curve, *, scale=None, n_frames: int = DEFAULT_FRAMES, solver=None):
+    """Everything an animation of ``curve`` needs: ``(geometry, shown frames, scale, kw)``
+    with ``kw`` the :class:`vjm_pin.viewer.Animation` keywords (stability, forces, critical
+    frame, labels, load slider in mm, other branches) and ``kw["_frames"]`` the
+    :class:`CurveFrame` list (popped by the callers)."""
+    from ..viewer import Branch, magnify
+
+    frames, crit = curve_frames(vm, curve, n_frames, solver)
+    if frames[0].deflection > 0:  # the unloaded robot first
+        frames.insert(
+            0, CurveFrame(0.0, 0.0, np.zeros(6), True, np.asarray(vm.reference, float), "curve")
+        )
+        crit = [None if c is None else c + 1 for c in crit]
+    branches = branch_frames(vm, curve, frames, solver)
+    xs = [f.x for f in frames] + [q for b in branches for q in b.frames if q is not None]
+    geom, _, scale = _scene(vm, xs, scale)
+    shown = [magnify(vm.reference, f.x, scale) for f in frames]
+    branches = [
+        Branch(
+            tuple(None if q is None else magnify(vm.reference, q, scale) for q in b.frames),
+            b.stable,
+            b.name,
+        )
+        for b in branches
+    ]
+    labels = [_label(f.deflection, f.force, f.stable) for f in frames]
+    critical = next((c for c in crit if c is not None), None)
+    crit_text = None
+    if critical is not None:
+        c = curve.critical[crit.index(critical)]
+        labels[critical] = (
+            f"CRITICAL POINT: F_cr = {abs(c.force):.4g} N at δ = {c.deflection * 1e3:.4g} mm "
+            f"(stiffness {c.stiffness_before:.4g} → {c.stiffness_after:.4g} N/m)"
+        )
+        if critical + 1 < len(frames):
+            labels[critical + 1] += (
+                f" — first frame past the critical point F_cr = {abs(c.force):.4g} N at δ = {c.deflection * 1e3:.4g} mm"
+            )
+        crit_text = f"critical: F_cr = {abs(c.force):.4g} N, δ = {c.deflection * 1e3:.4g} mm"
+    for k, f in enumerate(frames):
+        alt = [b for b in branches if b.frames[k] is not None]
+        if alt:
+            labels[k] += (
+                f"; {len(alt)} other equilibri{'um' if len(alt) == 1 else 'a'} shown ({sum(not b.stable[k] for b in alt)} unstable)"
+            )
+    kw = {
+        "stable": [f.stable for f in frames],
+        "forces": [f.wrench[:3] for f in frames],
+        "critical_index": critical,
+        "critical_label": crit_text,
+        "frame_labels": labels,
+        "branches": branches,
+        "slider": {"name": "δ", "unit": "mm", "values": [f.deflection * 1e3 for f in frames]},
+        "_frames": frames,
+    }
+    return geom, shown, scale, kw
+
+
+@dataclass(frozen=True)
+class CurvePage:
+    """An exported curve animation.
+
+    Attributes:
+        html: The page.
+        scale: Deformation magnification used (dimensionless).
+        frames: Number of animation frames.
+        critical_frame: Frame index of the first critical point (the pre-critical state at
+            the critical deflection), or None.
+        curve_frames: The :class:`CurveFrame` of every animation frame.
+        branches: Number of other branches drawn.
+    """
+
+    html: str
+    scale: float
+    frames: int
+    critical_frame: int | None
+    curve_frames: tuple = ()
+    branches: int = 0
+
+
 def curve_page(
     vm,
     curve,
@@ -136,87 +474,172 @@ def curve_page(
     scale: float | None = None,
     path=None,
     title: str | None = None,
-    fps: float = 10.0,
+    fps: float = 15.0,
+    n_frames: int = DEFAULT_FRAMES,
     **options,
 ) -> CurvePage:
     """Animated page of ``vm`` along ``curve`` (a ``vjm_pin.solver.curve.Curve``).
 
-    Frame 0 is the unloaded robot unless the curve starts at zero deflection; then one frame
-    per curve point, coloured by its stability, with the force arrow scaled to its load and
-    the critical marker at the first critical point. ``scale`` magnifies the deformation
+    Frames from :func:`curve_frames` (dense around the critical points), the unloaded robot
+    first; each coloured by its stability, with the force arrow and its value in N, the
+    critical marker at the first critical point, a load slider in mm of deflection and, when
+    the curve was traced with ``all_branches=True``, the other branches as second robots
+    (red where unstable). ``scale`` magnifies the deformation
     (:func:`vjm_pin.viewer.magnify`); None picks :func:`vjm_pin.viewer.default_scale`.
     ``options`` go to :func:`vjm_pin.viewer.export_html` (e.g. ``camera_direction``).
     """
     from ..viewer import export_html
 
-    points = list(curve.points)
-    xs, stable, forces, labels = [], [], [], []
-    offset = 0
-    if not points or abs(points[0].deflection) > 0:
-        xs.append(vm.reference.copy())
-        stable.append(True)
-        forces.append(np.zeros(3))
-        labels.append(_label(0.0, 0.0, True))
-        offset = 1
-    for pt in points:
-        xs.append(np.asarray(pt.equilibrium.x, float))
-        stable.append(bool(pt.stable) if pt.stable is not None else True)
-        forces.append(np.asarray(pt.wrench, float)[:3])
-        labels.append(_label(pt.deflection, pt.force, pt.stable))
-    critical = curve.critical[0].index + offset if curve.critical else None
-    geom, shown, scale = _scene(vm, xs, scale)
+    geom, shown, scale, kw = curve_animation(vm, curve, scale=scale, n_frames=n_frames)
+    frames = kw.pop("_frames")
     d = np.asarray(curve.direction, float)
     text = (
         title or f"{vm.name}: path along deflection direction {np.array2string(d[:3], precision=3)}"
     )
     text += f" — deformation ×{scale:g}"
-    if critical is not None:
-        c = curve.critical[0]
-        labels[critical] += f" — first frame past the critical point F_cr = {abs(c.force):.4g} N at δ = {c.deflection * 1e3:.4g} mm"
+    if kw["branches"]:
+        text += f" — {len(kw['branches'])} other branch{'es' if len(kw['branches']) > 1 else ''}"
+    kw.update(options)
     page = export_html(
         vm.model,
         geom,
         shown,
         ghost_q=vm.reference,
-        stable=stable,
-        forces=forces,
         frame_name=vm.frame,
-        critical_index=critical,
         fps=fps,
         title_text=text,
-        frame_labels=labels,
         path=path,
-        **options,
+        **kw,
     )
-    return CurvePage(page, scale, len(shown), critical)
+    return CurvePage(
+        page, scale, len(shown), kw["critical_index"], tuple(frames), len(kw["branches"])
+    )
 
 
-def load_frames(vm, res, scale: float | None = None, n: int = 11):
-    """Frames growing the equilibrium ``res`` from the unloaded robot (display only):
-    the deformation and the force are interpolated linearly, n frames."""
-    ts = np.linspace(0.0, 1.0, n)
-    xs = [vm.reference + t * (res.x - vm.reference) for t in ts]
+# ----------------------------------------------------------------------------- load path
+DEFAULT_LOAD_FRAMES = 21
+
+
+def load_path(vm, load, kind: str, n: int = DEFAULT_LOAD_FRAMES, solver=None):
+    """Equilibria along the straight load path ``t·load``, ``t = 0 … 1`` in ``n`` steps.
+
+    Each is solved at its own load factor, warm started from the previous one (so the path
+    is followed continuously); ``kind`` is ``"deflection"`` (``load`` prescribes the end
+    deflection, m and rad) or ``"wrench"`` (``load`` is the end wrench, N and N·m).
+
+    Returns:
+        (load factors (n,), list of :class:`~vjm_pin.solver.EquilibriumResult`).
+
+    Raises:
+        NoEquilibrium: no equilibrium at some load factor (the message names it).
+    """
+    from ..exceptions import InputError, NoEquilibrium
+    from ..solver import EquilibriumSolver
+
+    if kind not in ("deflection", "wrench"):
+        raise InputError(f"kind must be 'deflection' or 'wrench', got {kind!r}")
+    if int(n) != n or n < 2:
+        raise InputError(f"n must be an integer >= 2, got {n}")
+    solver = solver or EquilibriumSolver(vm)
+    load = np.asarray(load, float).ravel()
+    ts = np.linspace(0.0, 1.0, int(n))
+    out = []
+    prev = None
+    for t in ts:
+        try:
+            if kind == "deflection":
+                eq = solver.solve(
+                    t * load,
+                    x0=None if prev is None else prev.x,
+                    wrench0=None if prev is None else prev.wrench,
+                )
+            else:
+                eq = solver.solve_wrench(t * load, x0=None if prev is None else prev.x)
+        except NoEquilibrium as e:
+            raise NoEquilibrium(
+                f"no equilibrium at {t:.0%} of the {kind} on the load path: {e}",
+                e.result,
+                e.residual,
+            ) from None
+        out.append(eq)
+        prev = eq
+    return ts, out
+
+
+def load_frames(vm, ts, results, scale: float | None = None, kind: str = "wrench"):
+    """Animation of the equilibria ``results`` of :func:`load_path`: ``(geometry, shown
+    frames, scale, kw)`` with ``kw`` the :class:`vjm_pin.viewer.Animation` keywords; each
+    frame is labelled with its own force (N) and deflection (mm), and the page's slider is
+    in N (``kind="wrench"``) or mm (``kind="deflection"``)."""
+    xs = [np.asarray(r.x, float) for r in results]
+    forces = [np.asarray(r.wrench, float)[:3] for r in results]
+    stable = [r.stable is not False for r in results]
+    unloaded = [t == 0 for t in ts]
+    for k, u in enumerate(unloaded):
+        # at zero load the unloaded robot is the equilibrium (the solver's start at a singular
+        # configuration, e.g. a straight chain, may report an arbitrary indeterminate force)
+        if u:
+            xs[k], forces[k], stable[k] = np.asarray(vm.reference, float), np.zeros(3), True
     geom, shown, scale = _scene(vm, xs, scale)
-    forces = [t * np.asarray(res.wrench, float)[:3] for t in ts]
-    stable = [True] * (n - 1) + [res.stable is not False]
-    labels = [f"load ×{t:.1f}" for t in ts[:-1]] + [
-        _label(
-            float(np.linalg.norm(res.deflection[:3])),
-            float(np.linalg.norm(res.wrench[:3])),
-            res.stable,
+    labels = []
+    for t, r, u in zip(ts, results, unloaded):
+        if u:
+            labels.append("load ×0.00: unloaded robot, |F| = 0 N, |δ| = 0 mm")
+            continue
+        f = float(np.linalg.norm(np.asarray(r.wrench, float)[:3]))
+        dmm = float(np.linalg.norm(np.asarray(r.deflection, float)[:3])) * 1e3
+        labels.append(
+            f"load ×{t:.2f}: |F| = {f:.4g} N, |δ| = {dmm:.4g} mm, "
+            + ("stable" if r.stable is not False else "UNSTABLE")
         )
-    ]
-    return geom, shown, scale, {"stable": stable, "forces": forces, "frame_labels": labels}
+    if kind == "wrench":
+        slider = {"name": "|F|", "unit": "N", "values": [float(np.linalg.norm(f)) for f in forces]}
+    else:
+        slider = {
+            "name": "|δ|",
+            "unit": "mm",
+            "values": [
+                0.0 if u else float(np.linalg.norm(np.asarray(r.deflection, float)[:3])) * 1e3
+                for r, u in zip(results, unloaded)
+            ],
+        }
+    return (
+        geom,
+        shown,
+        scale,
+        {"stable": stable, "forces": forces, "frame_labels": labels, "slider": slider},
+    )
 
 
 # ----------------------------------------------------------------------------- command
 def run(args) -> int:
     from ..exceptions import InputError
+    from ..outputs import HTML_EXTENSIONS
     from ..solver import EquilibriumSolver
-    from .common import finite_vector
-
     from .analyze import load_from_args
+    from .common import check_output_option, direction_vector, finite_vector
+    from .parallel_cmds import is_parallel_model
 
+    check_output_option(args, "--html", HTML_EXTENSIONS)  # before any work
+    if is_parallel_model(args.model):
+        raise InputError(
+            f"'{args.model}' is a parallel model (<vjm:leg> tags); 'vjm-pin view' shows serial "
+            "chains only (use 'vjm-pin analyze' or 'vjm-pin curve' for it)"
+        )
+    if not args.curve:
+        extra = [
+            flag
+            for flag, given in (
+                ("--direction", args.direction is not None),
+                ("--max-deflection", args.max_deflection is not None),
+                ("--steps", args.steps != DEFAULT_STEPS),
+                ("--all-branches", args.all_branches),
+            )
+            if given
+        ]
+        if extra:
+            verb = "apply" if len(extra) > 1 else "applies"
+            raise InputError(f"{', '.join(extra)} {verb} with --curve only")
     vm, _ = load_from_args(args)
     if args.scale is not None and not (np.isfinite(args.scale) and args.scale > 0):
         raise InputError(f"--scale must be a positive number, got {args.scale}")
@@ -229,38 +652,27 @@ def run(args) -> int:
             )
         if args.steps < 2:
             raise InputError(f"--steps must be at least 2, got {args.steps}")
-        direction = finite_vector(args.direction, "--direction")
-        curve = trace(vm, direction, args.max_deflection, args.steps)
-        if args.html:
+        direction = direction_vector(args.direction, "--direction")
+        curve = trace(vm, direction, args.max_deflection, args.steps, args.all_branches)
+        if args.html is not None:
             cp = curve_page(vm, curve, scale=args.scale, path=args.html)
             print(f"wrote {args.html}: {cp.frames} frames, deformation ×{cp.scale:g}")
             _maybe_open(args)
             return 0
-        from ..viewer import default_scale, magnify
-
-        xs = [vm.reference] + [np.asarray(p.equilibrium.x, float) for p in curve.points]
-        scale = args.scale or default_scale(vm.model, vm.reference, xs)
-        kw = {
-            "stable": [True] + [p.stable is not False for p in curve.points],
-            "forces": [np.zeros(3)] + [np.asarray(p.wrench, float)[:3] for p in curve.points],
-            "critical_index": curve.critical[0].index + 1 if curve.critical else None,
-        }
-        return _serve(
-            vm,
-            robot_geometry(vm),
-            [magnify(vm.reference, x, scale) for x in xs],
-            scale,
-            args,
-            kw,
-        )
+        geom, shown, scale, kw = curve_animation(vm, curve, scale=args.scale)
+        kw.pop("_frames")
+        return _serve(vm, geom, shown, scale, args, kw)
     solver = EquilibriumSolver(vm)
+    # true equilibria along the load path t·load (warm started), not an interpolation
     if args.deflection is not None:
-        res = solver.solve(finite_vector(args.deflection, "--deflection"))
+        kind, load = "deflection", finite_vector(args.deflection, "--deflection")
     else:
-        res = solver.solve_wrench(finite_vector(args.wrench, "--wrench"))
-    geom, shown, scale, kw = load_frames(vm, res, args.scale)
+        kind, load = "wrench", finite_vector(args.wrench, "--wrench")
+    ts, path = load_path(vm, load, kind, solver=solver)
+    res = path[-1]
+    geom, shown, scale, kw = load_frames(vm, ts, path, args.scale, kind)
     title = f"{vm.name}: loaded equilibrium — deformation ×{scale:g}"
-    if args.html:
+    if args.html is not None:
         from ..viewer import export_html
 
         export_html(
