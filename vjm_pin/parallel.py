@@ -533,7 +533,7 @@ def trace_robot_curve(
 # --------------------------------------------------------------------------------------------
 
 #: A step whose directional stiffness falls below this fraction of the previous one is a
-#: critical point (same rule as :data:`vjm_pin.solver.curve.DROP_RATIO`).
+#: critical point (the older rule of the serial tracer; parallel curves keep it until the mechanism core replaces this module).
 ROBOT_DROP_RATIO = 0.5
 #: Amplitudes (m or rad) of the perturbation along the unstable mode that leaves a saddle.
 _PERTURB = (1e-4, 1e-3, 1e-2)
