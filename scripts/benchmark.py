@@ -17,17 +17,24 @@ Measured for the bundled ``paper-c-s`` model (Model C, S posture: a straight col
 - the OpenSeesPy peer (``scripts/opensees_peer.py``): critical force and wall time of the same
   column with corotational beams, next to vjm_pin's critical force on the subdivided model;
 - ``ur5`` with 6-D link springs and map throughput, when those modules exist (else a note).
+- the quick wins of issue 14 as before/after ratios measured side by side in the same run
+  (interleaved repeats; "before" = the library's private switches off, plus a copy of the old
+  map pose evaluation): the subnormal flush (one Pinocchio J + Hessian, warm-started solves, the
+  k = 1 and k = 8 column curves), one BLAS thread inside the solver (k = 8 curve, with the two
+  ablations), and the map pose evaluation (ur5 with actuator springs / 6-D link springs).
+  ``--quick-wins-only`` runs this section alone.
 
 Minimum and median over repeats are reported (other processes share the machine). Timings
 are never asserted by tests; ``tests/test_benchmark_smoke.py`` runs these functions on tiny
 sizes and checks structure and that the baseline reproduces the Pinocchio results.
 
-Usage: ``python scripts/benchmark.py [--quick] [--json bench.json] [--repeats N]``.
+Usage: ``python scripts/benchmark.py [--quick] [--json bench.json] [--repeats N] [--quick-wins-only]``.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib.util
 import itertools
 import json
@@ -584,6 +591,251 @@ def bench_map(n: int = 200, wrench=(0.0, 0.0, -100.0, 0.0, 0.0, 0.0)) -> dict:
     return out
 
 
+# --------------------------------------------------------------------------- quick wins (issue 14)
+@contextlib.contextmanager
+def old_behaviour(flush: bool = False, one_thread: bool = False):
+    """The behaviour before the quick wins of issue 14, through the library's private switches:
+    no subnormal flush (``vjm_pin.kinematics._flush_enabled``) and BLAS pools as the
+    environment sets them (``vjm_pin.solver.threads._enabled``). ``flush`` / ``one_thread``
+    keep one of the two on (ablation)."""
+    import vjm_pin.kinematics as kmod
+    from vjm_pin.solver import threads
+
+    old = (kmod._flush_enabled, threads._enabled)
+    kmod._flush_enabled, threads._enabled = flush, one_thread
+    try:
+        yield
+    finally:
+        kmod._flush_enabled, threads._enabled = old
+
+
+def side_by_side(variants: dict, repeats: int) -> dict:
+    """Run every variant ``name -> (context factory, fn)`` ``repeats`` times, interleaved
+    (before, after, before, after, …: the same machine load for both); min and median (s) and
+    the last return value of each."""
+    times = {k: [] for k in variants}
+    last = {}
+    for _ in range(repeats):
+        for name, (ctx, fn) in variants.items():
+            with ctx():
+                t = time.perf_counter()
+                last[name] = fn()
+                times[name].append(time.perf_counter() - t)
+    return {k: {"min": min(v), "median": statistics.median(v), "repeats": repeats, "value": last[k]} for k, v in times.items()}
+
+
+def _curve_summary(c) -> dict:
+    return {"force": np.array([p.force for p in c.points]), "critical": [float(cp.force) for cp in c.critical]}
+
+
+def _agreement(a: dict, b: dict) -> float:
+    """Largest relative difference of the curve forces and critical forces of two runs."""
+    fa, fb = a["force"], b["force"]
+    scale = max(np.abs(fa).max(), 1e-300)
+    err = float(np.abs(fa - fb).max() / scale) if fa.shape == fb.shape else float("inf")
+    if len(a["critical"]) != len(b["critical"]):
+        return float("inf")
+    for x, y in zip(a["critical"], b["critical"]):
+        err = max(err, abs(x - y) / max(abs(x), 1e-300))
+    return err
+
+
+def bench_subnormal_eval(k: int = 1, repeats: int = 7, number: int = 50) -> dict:
+    """Pinocchio J + kinematic Hessian (``Kinematics.evaluate``) at a converged straight-column
+    configuration of an unflushed curve (coordinates down to subnormal floats) and at the same
+    configuration flushed (|x| < 1e-150 → 0)."""
+    from vjm_pin.kinematics import FLUSH_BELOW
+    from vjm_pin.solver.curve import trace_curve
+
+    vm = paper_model(k)
+    with old_behaviour():
+        c = trace_curve(vm, DIRECTION, default_max_deflection(vm), steps=20)
+    tiny = [int(np.sum((np.abs(p.equilibrium.x) < FLUSH_BELOW) & (p.equilibrium.x != 0))) for p in c.points]
+    x = c.points[int(np.argmax(tiny))].equilibrium.x.copy()
+    xf = np.where(np.abs(x) < FLUSH_BELOW, 0.0, x)
+    kin = Kinematics(vm.model, vm.frame_id)
+
+    def ev(y):
+        def f():
+            kin._last = None  # force a Pinocchio call
+            kin.evaluate(y)
+        return f
+
+    per_call = {"raw": [], "flushed": []}
+    for _ in range(repeats):  # interleaved
+        per_call["raw"].append(timeit(ev(x), 1, number)["min"])
+        per_call["flushed"].append(timeit(ev(xf), 1, number)["min"])
+    out = {"k": k, "nv": int(vm.model.nv), "tiny_coordinates": int(max(tiny)), "smallest_nonzero": float(np.abs(x[x != 0]).min())}
+    for name, ts in per_call.items():
+        out[name] = {"min": min(ts), "median": statistics.median(ts)}
+    out["ratio"] = out["raw"]["min"] / out["flushed"]["min"]
+    return out
+
+
+def bench_curve_quick_wins(k: int, steps: int, repeats: int, ablation: bool = True) -> dict:
+    """The ``k``-subdivided column's compression curve (``trace_curve``, ``steps`` points,
+    stiffness, stability and critical points), before / after the quick wins side by side."""
+    from vjm_pin.solver.curve import trace_curve
+
+    vm = paper_model(k)
+    md = default_max_deflection(vm)
+
+    def run():
+        return _curve_summary(trace_curve(vm, DIRECTION, md, steps=steps))
+
+    variants = {"before": (old_behaviour, run)}
+    if ablation:
+        variants["flush_only"] = (lambda: old_behaviour(flush=True), run)
+        variants["one_thread_only"] = (lambda: old_behaviour(one_thread=True), run)
+    variants["after"] = (contextlib.nullcontext, run)
+    r = side_by_side(variants, repeats)
+    out = {"k": k, "nv": int(vm.model.nv), "n_theta": int(vm.n_theta), "steps": steps}
+    for name, v in r.items():
+        out[name] = {"min": v["min"], "median": v["median"], "repeats": v["repeats"]}
+    out["speedup"] = r["before"]["min"] / r["after"]["min"]
+    out["agreement"] = max(_agreement(r["before"]["value"], v["value"]) for v in r.values())
+    out["critical_force"] = r["after"]["value"]["critical"]
+    return out
+
+
+def bench_newton_quick_wins(steps: int, repeats: int) -> dict:
+    """Warm-started solves along the k = 1 column's compression (no stiffness): per solve."""
+    vm = paper_model(1)
+    pts = np.linspace(default_max_deflection(vm) / steps, default_max_deflection(vm), steps)
+
+    def run():
+        s = EquilibriumSolver(vm)
+        prev, total = None, 0
+        for d in pts:
+            r = s.solve(d * DIRECTION, x0=None if prev is None else prev.x, wrench0=None if prev is None else prev.wrench)
+            total += r.iterations
+            prev = r
+        return total
+
+    r = side_by_side({"before": (old_behaviour, run), "after": (contextlib.nullcontext, run)}, repeats)
+    return {
+        "steps": steps,
+        "iterations": {k: int(v["value"]) for k, v in r.items()},
+        "per_solve": {k: {"min": v["min"] / steps, "median": v["median"] / steps} for k, v in r.items()},
+        "speedup": r["before"]["min"] / r["after"]["min"],
+    }
+
+
+def _evaluate_pose_before(vm, names, values, wrench, method="eq30"):
+    """A copy of ``vjm_pin.maps.evaluate_pose`` before issue 14 (no gravity requested): a fresh
+    ``Kinematics`` (``pin.Data``) for the reference placement, the solver's own and the
+    stiffness's, and, for models without passive joints, ``solve_loaded`` evaluating the link-load
+    terms every Newton iteration (a model copy + ``createData`` + RNEA each; reproduced here by a
+    gravity of 1e-300 m/s², whose terms are numerically nothing but cost the same)."""
+    from vjm_pin.exceptions import NoEquilibrium, SingularStiffness
+    from vjm_pin.loads import LinkLoads, solve_loaded
+    from vjm_pin.maps import stiffness_indices
+
+    v = vm.with_positions(dict(zip(names, (float(x) for x in values))))
+    Kinematics(v.model, v.frame_id).placement(v.reference)
+    w = np.asarray(wrench, float)
+    try:
+        if v.n_q == 0:
+            eq = solve_loaded(v, w, LinkLoads(np.array([0.0, 0.0, 1e-300])), method=method)
+            if eq.stiffness is None:
+                return None
+            k = eq.stiffness.stiffness
+        else:
+            res = EquilibriumSolver(v).solve_wrench(w)
+            k = loaded_stiffness(v, res, method).stiffness
+    except (SingularStiffness, NoEquilibrium):
+        return None
+    return stiffness_indices(k, w, v.task)
+
+
+def bench_map_quick_wins(n: int, repeats: int, wrench=(0.0, 0.0, -100.0, 0.0, 0.0, 0.0)) -> dict:
+    """Serial map throughput (poses/s) of ``ur5`` with actuator springs only and with 6-D link
+    springs: the pose evaluation before issue 14 (:func:`_evaluate_pose_before`, old switches)
+    and ``vjm_pin.maps.evaluate_pose`` now, side by side, one process."""
+    if importlib.util.find_spec("vjm_pin.robots") is None:
+        return {"skipped": "vjm_pin.robots missing"}
+    from vjm_pin.maps import evaluate_pose, sample_poses
+    from vjm_pin.robots import build_robot
+
+    out = {}
+    for label, make in (("ur5 actuator springs", lambda: build_robot("ur5").vm), ("ur5 + 6-D link springs", ur5_model)):
+        try:
+            vm = make()
+        except Exception as e:  # noqa: BLE001 - example-robot-data missing, etc.
+            out[label] = {"skipped": f"{type(e).__name__}: {e}"}
+            continue
+        names, poses = sample_poses(vm, n, seed=0)
+        w = np.array(wrench)
+
+        def before():
+            return [_evaluate_pose_before(vm, names, row, w) for row in poses]
+
+        def after():
+            return [evaluate_pose(vm, names, row, w) for row in poses]
+
+        r = side_by_side({"before": (old_behaviour, before), "after": (contextlib.nullcontext, after)}, repeats)
+        kb = np.array([np.nan if x is None else x[0] for x in r["before"]["value"]])
+        ka = np.array([row["k_along"] for row in r["after"]["value"]])
+        ok = np.isfinite(kb) & np.isfinite(ka)
+        out[label] = {
+            "poses": n,
+            "before_poses_per_s": n / r["before"]["min"],
+            "after_poses_per_s": n / r["after"]["min"],
+            "speedup": r["before"]["min"] / r["after"]["min"],
+            "k_along_max_rel_diff": float(np.max(np.abs(kb[ok] - ka[ok]) / np.abs(ka[ok]))) if ok.any() else float("nan"),
+        }
+    return out
+
+
+def run_quick_wins(quick: bool = False, repeats: int = 3) -> dict:
+    """Every quick win of issue 14 as a before/after ratio, measured side by side in one run."""
+    reps = 1 if quick else repeats
+    return {
+        "subnormal_eval": bench_subnormal_eval(1, repeats=3 if quick else 7, number=20 if quick else 100),
+        "newton_k1": bench_newton_quick_wins(20 if quick else 200, reps),
+        "curve_k1": bench_curve_quick_wins(1, 20 if quick else 200, 1 if quick else 5),
+        "curve_k8": bench_curve_quick_wins(2 if quick else 8, 10 if quick else 200, reps, ablation=True),
+        "map": bench_map_quick_wins(10 if quick else 100, reps),
+    }
+
+
+def format_quick_wins(q: dict, machine: dict) -> str:
+    lines = [
+        "quick wins of issue 14, before / after side by side (min of interleaved repeats, same process)",
+        f"machine: {machine['cores']} cores, {machine['cpu']}; BLAS {machine['blas']}",
+    ]
+    se = q["subnormal_eval"]
+    lines.append(
+        f"  J + kinematic Hessian at a converged straight-column configuration (k={se['k']}, {se['tiny_coordinates']} coordinates "
+        f"< 1e-150, smallest {se['smallest_nonzero']:.1e}): raw {se['raw']['min'] * 1e6:.1f} µs, flushed "
+        f"{se['flushed']['min'] * 1e6:.1f} µs: {se['ratio']:.2f}x"
+    )
+    nk = q["newton_k1"]
+    lines.append(
+        f"  warm-started solves, k=1, {nk['steps']} points: {nk['per_solve']['before']['min'] * 1e3:.3f} -> "
+        f"{nk['per_solve']['after']['min'] * 1e3:.3f} ms/solve: {nk['speedup']:.2f}x (iterations {nk['iterations']['before']} -> {nk['iterations']['after']})"
+    )
+    for key in ("curve_k1", "curve_k8"):
+        c = q[key]
+        extra = ""
+        if "flush_only" in c:
+            extra = f" (flush only {c['flush_only']['min']:.3f} s, one BLAS thread only {c['one_thread_only']['min']:.3f} s)"
+        lines.append(
+            f"  trace_curve k={c['k']} (nθ={c['n_theta']}), {c['steps']} points: {c['before']['min']:.3f} -> {c['after']['min']:.3f} s: "
+            f"{c['speedup']:.2f}x{extra}; forces and critical points agree to {c['agreement']:.1e} (rel); "
+            f"min of {c['before']['repeats']}"
+        )
+    for label, m in q["map"].items():
+        if "skipped" in m:
+            lines.append(f"  map {label}: skipped ({m['skipped']})")
+            continue
+        lines.append(
+            f"  map {label}, {m['poses']} poses serial: {m['before_poses_per_s']:.0f} -> {m['after_poses_per_s']:.0f} poses/s: "
+            f"{m['speedup']:.2f}x; k_along agrees to {m['k_along_max_rel_diff']:.1e} (rel)"
+        )
+    return "\n".join(lines)
+
+
 # --------------------------------------------------------------------------- report
 def targets(report: dict) -> list[dict]:
     rows = []
@@ -698,8 +950,15 @@ def run(quick: bool = False, repeats: int = 5, opensees: bool = True, scaling_ks
         report["opensees"] = bench_opensees(opensees_k, ve, vjm_curve=vc)
     report["ur5"] = bench_ur5(repeats=1 if quick else 3)
     report["map"] = bench_map(n=40 if quick else 200)
+    report["quick_wins"] = run_quick_wins(quick, repeats=3)
     report["targets"] = targets(report)
     return report
+
+
+def _json_default(o):
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    return float(o)
 
 
 def main(argv=None) -> int:
@@ -709,10 +968,20 @@ def main(argv=None) -> int:
     ap.add_argument("--json", default="benchmark.json", help="output JSON path")
     ap.add_argument("--no-opensees", action="store_true")
     ap.add_argument("--opensees-k", type=int, default=8, help="elements (and VJM subdivisions) per link for the peer")
+    ap.add_argument("--quick-wins-only", action="store_true", help="only the before/after table of issue 14's quick wins")
     args = ap.parse_args(argv)
+    if args.quick_wins_only:
+        machine = machine_info()
+        q = run_quick_wins(args.quick, repeats=args.repeats)
+        print(format_quick_wins(q, machine))
+        Path(args.json).write_text(json.dumps({"machine": machine, "quick_wins": q}, indent=1, default=_json_default))
+        print(f"\nJSON: {args.json}")
+        return 0
     report = run(quick=args.quick, repeats=args.repeats, opensees=not args.no_opensees, opensees_k=args.opensees_k)
     print(format_report(report))
-    Path(args.json).write_text(json.dumps(report, indent=1, default=float))
+    print()
+    print(format_quick_wins(report["quick_wins"], report["machine"]))
+    Path(args.json).write_text(json.dumps(report, indent=1, default=_json_default))
     print(f"\nJSON: {args.json}")
     return 0
 

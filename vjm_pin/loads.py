@@ -119,6 +119,8 @@ def loaded_blocks(vm: VjmModel, x, wrench, loads: LinkLoads, kin: Kinematics | N
     from .solver import blocks_at
 
     b = blocks_at(vm, x, wrench, kin)
+    if not np.any(loads.gravity):  # H^G = 0 without link loads
+        return b
     hg = load_hessian(vm, loads, x)
     ti, qi = vm.theta_idx, vm.q_idx
     return replace(
@@ -167,7 +169,9 @@ def static_residual(
     coordinates and ``−J_qᵀ F − G_q`` on the passive ones (locked joints excluded)."""
     kin = kin or Kinematics(vm.model, vm.frame_id)
     st = kin.evaluate(np.asarray(x, float), hessian=False)
-    gen = st.jacobian.T @ np.asarray(wrench, float) + generalized_load(vm, loads, x)
+    gen = st.jacobian.T @ np.asarray(wrench, float)
+    if np.any(loads.gravity):  # no model copy and pin.Data without link loads (G = 0)
+        gen = gen + generalized_load(vm, loads, x)
     r = -gen
     r[vm.theta_idx] += vm.K_theta @ (np.asarray(x)[vm.theta_idx] - vm.theta0)
     idx = np.concatenate([vm.theta_idx, vm.q_idx]).astype(int)
@@ -183,6 +187,7 @@ def solve_loaded(
     max_iter: int = 50,
     steps: int = 1,
     method: str = "eq30",
+    kin: Kinematics | None = None,
 ) -> LoadedEquilibrium:
     """Equilibrium under an end wrench and link loads (eq. 5'), with its loaded stiffness
     (eq. 28'/30) and stability (eq. 23 with ``H + H^G``).
@@ -215,7 +220,7 @@ def solve_loaded(
     free = [i for i in range(6) if i not in vm.task]
     if np.any(w[free] != 0):
         raise InputError(f"wrench acts on components outside the task {vm.task_names}")
-    kin = Kinematics(vm.model, vm.frame_id)
+    kin = kin or Kinematics(vm.model, vm.frame_id)  # a map worker passes its own (one pin.Data)
     p0, r0 = kin.placement(vm.reference)
     ti = vm.theta_idx
     scale = max(float(np.abs(vm.K_theta).max()), 1e-300)

@@ -72,6 +72,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..exceptions import InputError, NoEquilibrium, SingularStiffness
+from ..kinematics import flush_tiny
 from ..model import VjmModel
 from .equilibrium import EquilibriumResult, EquilibriumSolver
 from .stability import (
@@ -83,6 +84,7 @@ from .stability import (
     spectral_norm,
 )
 from .stiffness import stiffness_from_blocks
+from .threads import one_blas_thread
 
 #: Maximum iterations of a root or extremum search (Illinois).
 MAX_BISECTIONS = 60
@@ -432,7 +434,7 @@ class _Tracer:
         t = self.tangent(a)
         ds = s - a.s
         if t is not None:
-            x_pred = a.eq.x + ds * t[0]
+            x_pred = flush_tiny(a.eq.x + ds * t[0])  # no subnormal coordinates (FLUSH_BELOW)
             w_pred = a.eq.wrench + ds * t[1]
         else:
             x_pred, w_pred = a.eq.x.copy(), a.eq.wrench.copy()
@@ -489,7 +491,7 @@ class _Tracer:
             return None
         ds = s - a.s
         eq = replace(
-            a.eq, x=a.eq.x + ds * t[0], wrench=a.eq.wrench + ds * t[1], path="tangent-prediction"
+            a.eq, x=flush_tiny(a.eq.x + ds * t[0]), wrench=a.eq.wrench + ds * t[1], path="tangent-prediction"
         )
         return self.point(eq, s)
 
@@ -915,6 +917,7 @@ def _unloaded(vm, solver, d, kin) -> EquilibriumResult | None:
     return probe
 
 
+@one_blas_thread
 def trace_curve(
     vm: VjmModel,
     direction,

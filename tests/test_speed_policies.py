@@ -1,0 +1,207 @@
+"""Issue 14 quick wins change no result: the subnormal flush (curves with and without it agree),
+one BLAS thread inside the solver's public calls (active inside, restored after), one
+Kinematics per map worker and no link-load terms without gravity (same numbers bit for bit).
+Timings live in scripts/benchmark.py, never here."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from threadpoolctl import threadpool_info, threadpool_limits
+
+import vjm_pin.kinematics as kmod
+from vjm_pin.exceptions import InputError
+from vjm_pin.kinematics import FLUSH_BELOW, Kinematics, flush_tiny
+from vjm_pin.model import load_vjm
+from vjm_pin.paper_models import PAPER_BEAM, paper_model_urdf
+from vjm_pin.registry import resolve_model
+from vjm_pin.solver import EquilibriumSolver, loaded_stiffness, trace_curve
+from vjm_pin.solver import threads as tmod
+
+COMPRESSION = np.array([-1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+
+
+def _max_deflection():
+    """6 × the column's axial shortening at its Euler load (well past buckling), m."""
+    a = PAPER_BEAM["a"] * PAPER_BEAM["b"]
+    i_weak = PAPER_BEAM["b"] * PAPER_BEAM["a"] ** 3 / 12.0
+    p_euler = np.pi**2 * PAPER_BEAM["E"] * i_weak / 3.0**2
+    return 6.0 * p_euler * 3.0 / (PAPER_BEAM["E"] * a)
+
+
+def _tiny(x):
+    return int(np.sum((np.abs(x) < FLUSH_BELOW) & (x != 0)))
+
+
+def test_flush_tiny_zeroes_only_tiny_entries():
+    x = np.array([1e-320, -1e-200, 1e-149, -2e-150, 0.0, np.nan, np.inf, 0.5, 9e-151])
+    out = flush_tiny(x)
+    assert out is x  # in place
+    np.testing.assert_array_equal(x[[0, 1, 4, 8]], 0.0)
+    assert x[2] == 1e-149 and x[3] == -2e-150 and x[7] == 0.5
+    assert np.isnan(x[5]) and x[6] == np.inf
+
+
+@pytest.mark.parametrize("k", [1, 2])
+def test_curve_with_and_without_flush_agree(k, monkeypatch):
+    vm = resolve_model("paper-c-s") if k == 1 else load_vjm(paper_model_urdf("c", "s", beam=PAPER_BEAM, subdivide=k))
+    md = _max_deflection()
+    monkeypatch.setattr(kmod, "_flush_enabled", False)
+    raw = trace_curve(vm, COMPRESSION, md, steps=30)
+    monkeypatch.setattr(kmod, "_flush_enabled", True)
+    flushed = trace_curve(vm, COMPRESSION, md, steps=30)
+    # the unflushed straight column does converge to tiny coordinates: the flush has work to do
+    assert max(_tiny(p.equilibrium.x) for p in raw.points) > 0
+    assert max(_tiny(p.equilibrium.x) for p in flushed.points) == 0
+    fr = np.array([p.force for p in raw.points])
+    ff = np.array([p.force for p in flushed.points])
+    np.testing.assert_allclose(ff, fr, rtol=1e-12, atol=1e-12 * np.abs(fr).max())
+    np.testing.assert_array_equal([p.stable for p in flushed.points], [p.stable for p in raw.points])
+    assert len(raw.critical) == len(flushed.critical) >= 1
+    for a, b in zip(raw.critical, flushed.critical):
+        assert b.kind == a.kind
+        assert b.force == pytest.approx(a.force, rel=1e-12)
+        assert b.deflection == pytest.approx(a.deflection, rel=1e-12, abs=1e-15)
+    sr = np.array([p.stiffness for p in raw.points])
+    sf = np.array([p.stiffness for p in flushed.points])
+    np.testing.assert_allclose(sf, sr, rtol=1e-9, atol=1e-12 * np.nanmax(np.abs(sr)))
+
+
+def _blas_threads():
+    return [d["num_threads"] for d in threadpool_info() if d["user_api"] == "blas"]
+
+
+@pytest.fixture
+def two_blas_threads():
+    with threadpool_limits(limits=2, user_api="blas"):
+        outer = _blas_threads()
+        assert outer and all(n == 2 for n in outer), f"precondition: BLAS pools at 2 threads, got {outer}"
+        yield
+
+
+def _spy_kinematics(solver, seen):
+    """Record the BLAS thread counts every time the solver evaluates its kinematics."""
+    inner = solver.kin.evaluate
+
+    def evaluate(x, hessian=True):
+        seen.append(_blas_threads())
+        return inner(x, hessian)
+
+    solver.kin.evaluate = evaluate
+
+
+def test_one_blas_thread_inside_solve_and_restored_after(two_blas_threads):
+    vm = resolve_model("paper-c-s")
+    solver = EquilibriumSolver(vm)
+    seen = []
+    _spy_kinematics(solver, seen)
+    res = solver.solve(1e-5 * COMPRESSION)
+    assert res.converged and seen
+    assert all(n == 1 for counts in seen for n in counts)
+    assert all(n == 2 for n in _blas_threads())
+    # nested public calls (solve_wrench -> solve_mixed): still one thread, restored at the end
+    seen.clear()
+    solver.solve_wrench(0.5 * res.wrench)
+    assert seen and all(n == 1 for counts in seen for n in counts)
+    assert all(n == 2 for n in _blas_threads())
+    loaded_stiffness(vm, res, kin=solver.kin)
+    assert all(n == 2 for n in _blas_threads())
+    # restored after an error too
+    with pytest.raises(InputError):
+        solver.solve([1.0, 2.0])
+    assert all(n == 2 for n in _blas_threads())
+
+
+def test_one_blas_thread_inside_trace_curve(two_blas_threads):
+    vm = resolve_model("paper-c-s")
+    seen = []
+    trace_curve(vm, COMPRESSION, _max_deflection(), steps=4, progress=lambda i, n: seen.append(_blas_threads()))
+    assert len(seen) == 5 and all(n == 1 for counts in seen for n in counts)
+    assert all(n == 2 for n in _blas_threads())
+
+
+def test_blas_policy_switch_off_leaves_pools_alone(two_blas_threads, monkeypatch):
+    monkeypatch.setattr(tmod, "_enabled", False)
+    vm = resolve_model("paper-c-s")
+    seen = []
+    trace_curve(vm, COMPRESSION, _max_deflection(), steps=2, progress=lambda i, n: seen.append(_blas_threads()))
+    assert seen and all(n == 2 for counts in seen for n in counts)
+
+
+def test_map_pose_one_blas_thread_and_shared_kinematics(two_blas_threads, monkeypatch):
+    from vjm_pin import maps
+    from vjm_pin.robots import build_robot
+
+    vm = build_robot("ur5").vm
+    names, poses = maps.sample_poses(vm, 3, seed=1)
+    w = np.array([0.0, 0.0, -100.0, 0.0, 0.0, 0.0])
+    seen = []
+    inner = maps._evaluate_pose
+
+    def spy(*a):
+        seen.append(_blas_threads())
+        return inner(*a)
+
+    monkeypatch.setattr(maps, "_evaluate_pose", spy)
+    maps._KIN_CACHE.clear()
+    shared = [maps.evaluate_pose(vm, names, p, w) for p in poses]
+    assert len(seen) == 3 and all(n == 1 for counts in seen for n in counts)
+    assert all(n == 2 for n in _blas_threads())
+    assert len({id(k) for k in maps._KIN_CACHE.values()}) == 1  # one pin.Data for all poses
+    # a fresh Kinematics per pose (the old way) gives the same numbers bit for bit
+    for p, row in zip(poses, shared):
+        maps._KIN_CACHE.clear()
+        fresh = maps.evaluate_pose(vm, names, p, w)
+        assert fresh["status"] == row["status"] == "ok"
+        np.testing.assert_array_equal(fresh["deflection"], row["deflection"])
+        assert fresh["k_along"] == row["k_along"] and fresh["k_min"] == row["k_min"]
+
+
+def test_no_gravity_skips_link_load_terms_same_blocks():
+    from vjm_pin.loads import LinkLoads, load_hessian, loaded_blocks, static_residual
+    from vjm_pin.robots import build_robot
+    from vjm_pin.solver import blocks_at
+
+    vm = build_robot("ur5").vm
+    x = vm.reference + 0.1
+    w = np.array([10.0, -5.0, -100.0, 1.0, 0.0, 2.0])
+    none = LinkLoads.none()
+    kin = Kinematics(vm.model, vm.frame_id)
+    b = loaded_blocks(vm, x, w, none, kin)
+    ref = blocks_at(vm, x, w)
+    hg = load_hessian(vm, none, x)  # evaluated anyway: zero without gravity
+    assert not np.any(hg)
+    np.testing.assert_array_equal(b.H_tt, ref.H_tt + hg[np.ix_(vm.theta_idx, vm.theta_idx)])
+    # the residual without the G term equals the full one with G = 0
+    st = kin.evaluate(x, hessian=False)
+    r = static_residual(vm, none, x, w, kin)
+    gen = -(st.jacobian.T @ w)
+    gen[vm.theta_idx] += vm.K_theta @ (x[vm.theta_idx] - vm.theta0)
+    np.testing.assert_allclose(r, gen[vm.theta_idx], rtol=0, atol=1e-12 * np.abs(gen).max())
+
+
+def test_benchmark_quick_wins_section_runs_and_before_after_agree():
+    """scripts/benchmark.py's before/after section on tiny sizes: structure, and the old path
+    (switches off, the copy of the old map pose evaluation) gives the same numbers."""
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "benchmark.py"
+    spec = importlib.util.spec_from_file_location("vjm_benchmark_qw", path)
+    bench = importlib.util.module_from_spec(spec)
+    sys.modules["vjm_benchmark_qw"] = bench
+    spec.loader.exec_module(bench)
+    c = bench.bench_curve_quick_wins(1, 4, 1, ablation=False)
+    assert c["agreement"] <= 1e-12 and c["before"]["min"] > 0 and c["after"]["min"] > 0
+    m = bench.bench_map_quick_wins(2, 1)
+    for row in m.values():
+        assert row["k_along_max_rel_diff"] <= 1e-12
+    text = bench.format_quick_wins(
+        {"subnormal_eval": bench.bench_subnormal_eval(1, repeats=1, number=2), "newton_k1": bench.bench_newton_quick_wins(2, 1),
+         "curve_k1": c, "curve_k8": c, "map": m},
+        bench.machine_info(),
+    )
+    assert "trace_curve k=1" in text and "poses/s" in text
+    # the switches are restored after the section
+    assert kmod._flush_enabled and tmod._enabled
