@@ -43,7 +43,7 @@ def is_vjm_urdf(path: Path) -> bool:
         raise ModelError(f"cannot read model file {path}: {e.strerror or e}") from None
 
 
-def resolve(name_or_path: str, *, frame=None, q=None, pose_name=None, springs=None):
+def resolve(name_or_path: str, *, frame=None, q=None, pose_name=None, springs=None, allow_closures=False):
     """Load a model from a VJM URDF, a bundled model name, a plain (rigid) URDF or the name of
     an ``example-robot-data`` robot.
 
@@ -51,6 +51,9 @@ def resolve(name_or_path: str, *, frame=None, q=None, pose_name=None, springs=No
     rigid links), optionally the spring spec ``springs``, the end ``frame``, the named SRDF
     pose ``pose_name`` and the joint positions ``q`` ({name: rad or m}). For a VJM URDF or a
     bundled model only ``q`` applies (:meth:`VjmModel.with_positions`).
+
+    Models with loop closures are refused unless ``allow_closures`` (callers that solve them
+    with :class:`~vjm_pin.solver.MechanismSolver`; the serial solver would ignore the closures).
 
     Returns:
         (vm, robot): the :class:`VjmModel`, and the :class:`~vjm_pin.robots.RobotModel` it was
@@ -97,7 +100,7 @@ def resolve(name_or_path: str, *, frame=None, q=None, pose_name=None, springs=No
             "whose frame and springs are in its tags"
         )
     vm = load_vjm(vjm_path)
-    if vm.closures:  # until the mechanism solver of issue 13: the tree solver would ignore them
+    if vm.closures and not allow_closures:  # callers that solve with the serial solver would ignore them
         raise ModelError(
             f"model '{name_or_path}' has loop closures ({', '.join(c.name for c in vm.closures)}); the solver "
             "of this version handles open chains only, it would ignore them"

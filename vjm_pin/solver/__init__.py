@@ -13,6 +13,7 @@ from ..model import VjmModel
 from .blocks import Blocks, evaluate_blocks, full_wrench
 from .curve import CriticalPoint, Curve, CurvePoint, trace_curve
 from .equilibrium import COMPONENTS, EquilibriumResult, EquilibriumSolver, solve_equilibrium, solve_for_wrench
+from .mechanism import MechanismResult, MechanismSolver
 from .stability import StabilityResult, check_stability, check_stability_held, null_space, reduced_matrix
 from .stiffness import (
     StiffnessResult,
@@ -22,6 +23,7 @@ from .stiffness import (
     stiffness_eq33,
     stiffness_from_blocks,
 )
+from .threads import one_blas_thread
 
 
 def blocks_at(vm: VjmModel, x: np.ndarray, wrench: np.ndarray, kin: Kinematics | None = None) -> Blocks:
@@ -30,6 +32,7 @@ def blocks_at(vm: VjmModel, x: np.ndarray, wrench: np.ndarray, kin: Kinematics |
     return evaluate_blocks(vm, kin, np.asarray(x, float), np.asarray(wrench, float))
 
 
+@one_blas_thread  # one BLAS thread inside the library (vjm_pin.solver.threads)
 def loaded_stiffness(vm: VjmModel, eq: EquilibriumResult, method: str = "eq30", kin: Kinematics | None = None) -> StiffnessResult:
     """Loaded Cartesian stiffness K_C (and K_q, K_θ) at the equilibrium ``eq`` (eq. 30/32/33).
 
@@ -59,6 +62,8 @@ __all__ = [
     "CurvePoint",
     "EquilibriumResult",
     "EquilibriumSolver",
+    "MechanismResult",
+    "MechanismSolver",
     "StabilityResult",
     "StiffnessResult",
     "blocks_at",

@@ -1,0 +1,798 @@
+"""One solver for a mechanism: loop closures, held/loaded task components, dead loads anywhere
+(issue 13; paper §4–5 generalised).
+
+A mechanism is one Pinocchio tree (:class:`~vjm_pin.model.VjmModel`) with springs ``K_θ``,
+passive joints, loop closures ``c(x) = 0`` (:mod:`vjm_pin.closures`, held at the assembled
+reference), one task frame whose components are *held* (deflection prescribed) or *loaded*
+(dead wrench prescribed), and dead loads at any frames plus link weights
+(:mod:`vjm_pin.dead_loads`). Only the spring and passive coordinates ``z = (θ, q)`` move;
+rigid actuated joints stay at their reference value.
+
+Equilibrium = stationary point of the total potential
+
+    Π(z) = ½(θ−θ₀)ᵀK_θ(θ−θ₀) − (work of the dead loads and of the loaded task wrench)
+
+subject to ``c(z) = 0`` and ``g_H(z) = t_H`` (held task rows of the pose error, as
+:meth:`~vjm_pin.solver.EquilibriumSolver.solve_mixed`). With ``A = [C; J_H]`` the stacked
+constraint Jacobian (closure rows first) and ``ν = (μ, λ)`` its multipliers (closure reaction
+multipliers, task reactions)::
+
+    r = [K_θ(θ−θ₀); 0] − Q_loads − J_Lᵀ w_L − Aᵀν = 0,     c = 0,    t_H − g_H = 0    (eq. 5 form)
+
+One Newton iteration over all coordinates with the matrix ``[[W, −A_Iᵀ], [A_I, 0]]``,
+
+    W = K − ∂Q_loads/∂z − H(w) − Σ_k μ_k ∂²c_k/∂z²                             (eq. 16 forms)
+
+(``H(w)`` the eq. 16 contraction of the total end wrench ``w``: dead load on loaded rows,
+reaction on held rows; the closure term is :meth:`~vjm_pin.closures.ClosureState.hessian`),
+solved in null-space form on the *independent* rows ``A_I`` (:func:`~vjm_pin.closures.constraint_rank`,
+closure rows preferred; redundant rows are dropped for the step: at an assembled configuration
+they are implied). Globalisation as the serial solver: a plain local Newton attempt first, then
+steps with the reduced Hessian shifted to be positive definite (descent towards a stable
+equilibrium), an Armijo line search on the merit ``Π + Σ ρ_i |b_i|`` (ℓ₁ penalty of the
+constraint residuals ``b``), an escape along negative curvature from a saddle, continuation in
+the load factor and the held deflection (4, then 16 steps), perturbed restarts.
+
+Multipliers. On the independent rows the multipliers are unique (least squares on the
+stationarity residual). With redundant rows (an over-constrained mechanism) the reactions are
+statically indeterminate; the reported multipliers are the **minimum-norm** set (Euclidean norm
+of the raw multipliers, N for translation rows and N·m for rotation rows) that carries the same
+generalised force — the choice of :func:`~vjm_pin.closures.min_norm_multipliers`; zero on rows
+that are identically zero (a planar loop closed in six components). The stability verdicts and
+K_C do not depend on this choice (the Lagrangian Hessian on the constraint null space does not).
+
+Stability (eq. 23 generalised): the symmetric part of ``−Zᵀ W Z`` must be negative definite,
+``Z`` an orthonormal basis of the null space of the stacked Jacobian: of (closure + held rows) for
+``stable`` (the control as run), of (closure + every task row) for ``stable_end_held``.
+
+Loaded stiffness (eq. 28 bordered with the closure rows)::
+
+    [[0, 0, J], [0, 0, C_I], [Jᵀ, C_Iᵀ, −W]] [δw; δμ; δz] = [δt; 0; 0],   K_C = ∂w/∂t
+
+(``J`` every task row), see :meth:`MechanismSolver.stiffness`.
+
+Public API::
+
+    solver = MechanismSolver(vm, loads=(), gravity=None, tol=1e-10, max_iter=60, restarts=2, seed=0)
+    res = solver.solve(deflection=None, wrench=None, held=None, x0=None)   # MechanismResult
+    solver.stiffness(res) -> StiffnessResult (method "eq28-closures")
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import pinocchio as pin
+
+from ..closures import RANK_RTOL, ClosureSet, constraint_rank
+from ..dead_loads import DeadLoads, Load
+from ..exceptions import InputError, NoEquilibrium, SingularStiffness
+from ..frames import FrameKinematics
+from ..kinematics import contract_hessian, deflection, displace, pose_error
+from ..model import VjmModel
+from .stability import STABILITY_TOL, StabilityResult, spectral_norm
+from .stiffness import SINGULAR_RCOND, StiffnessResult, _rcond
+from .threads import one_blas_thread
+
+#: Names of the six task components, in order.
+COMPONENTS = ("x", "y", "z", "rx", "ry", "rz")
+#: Margin (relative to max|K_θ|) below which the reduced Hessian is shifted when a stable
+#: equilibrium is sought (as :data:`vjm_pin.solver.equilibrium.SHIFT_TOL`).
+SHIFT_TOL = 1e-10
+#: Further Newton steps at convergence while the step exceeds :data:`POLISH_STEP` (relative).
+POLISH_ITERATIONS = 3
+POLISH_STEP = 1e-12
+#: Iterations of the plain local attempt; the descent budget in units of ``max_iter``.
+LOCAL_MAX_ITER = 12
+DESCENT_ITER_FACTOR = 8
+#: Largest step (rad, or ×L_c for prismatic coordinates) of one Newton iteration.
+MAX_STEP = 0.3
+#: Rotation-target iterations of a task holding some but not all rotations, and their tolerance (rad).
+ROTATION_TARGET_ITER = 30
+ROTATION_TARGET_TOL = 1e-12
+#: Note attached to a result whose multipliers are not unique.
+MULTIPLIERS_NOTE = (
+    "{n} redundant constraint row(s) ({labels}): the reactions are statically indeterminate; "
+    "the reported multipliers are the minimum-norm set (N, N·m) that carries the same generalised force"
+)
+
+
+@dataclass(frozen=True)
+class MechanismResult:
+    """An equilibrium of a mechanism (:meth:`MechanismSolver.solve`).
+
+    Attributes:
+        x: (nq,) configuration (m, rad), Pinocchio order.
+        q: (n_q,) passive coordinates. theta: (n_θ,) spring coordinates.
+        wrench: (6,) total wrench on the task frame (N at its origin, N·m; world axes):
+            reaction on held components, the dead load on loaded ones, zero off the task.
+        closure_multipliers: (m_c,) closure multipliers ``μ`` (N for translation rows, N·m for
+            rotation rows; rows in ``closure_labels`` order); minimum-norm when redundant.
+        closure_labels: Row names ``"<closure>.<component>"``.
+        reaction_wrenches: Closure name → (W_a, W_b), the reaction wrenches (6,) on frame_a and
+            frame_b (N, N·m; world axes, at the frame origins).
+        deflection: (6,) task-frame deflection ``(p − p0, log3(R R0ᵀ))`` (m, rad).
+        position: (3,) task-frame position (m). rotation: (3, 3).
+        converged: Eq. (5) form holds to the tolerance.
+        iterations: Newton iterations over all attempts.
+        residuals: Per unit: ``position`` (m) and ``orientation`` (rad) of the held task rows,
+            ``closure_position`` (m) and ``closure_orientation`` (rad), ``statics`` (N·m, rows
+            of revolute coordinates) and ``statics_prismatic`` (N).
+        energy: Spring energy (J).
+        path: How it was found (``"newton"``, ``"+descent"``, ``"+continuation(4)"``, ...).
+        held: Held task components (0..5); the other task components were loaded.
+        stability: Verdict for the control as run (null space of closure + held rows).
+        stability_end_held: Eq. (23) (null space of closure + every task row).
+        redundant: Labels of the redundant constraint rows (closure rows ``"<closure>.<c>"``,
+            task rows ``"task.<c>"``) of the stacked (closure + held) Jacobian at ``x``.
+        multipliers_note: Why the multipliers are a choice (None when they are unique).
+        warnings: Plain-language notes.
+    """
+
+    x: np.ndarray
+    q: np.ndarray
+    theta: np.ndarray
+    wrench: np.ndarray
+    closure_multipliers: np.ndarray
+    closure_labels: tuple[str, ...]
+    reaction_wrenches: dict
+    deflection: np.ndarray
+    position: np.ndarray
+    rotation: np.ndarray
+    converged: bool
+    iterations: int
+    residuals: dict = field(default_factory=dict)
+    energy: float = 0.0
+    path: str = ""
+    held: tuple[int, ...] = ()
+    stability: StabilityResult | None = None
+    stability_end_held: StabilityResult | None = None
+    redundant: tuple[str, ...] = ()
+    multipliers_note: str | None = None
+    warnings: tuple[str, ...] = ()
+
+    @property
+    def stable(self) -> bool | None:
+        """Verdict for the control as run (None if not evaluated)."""
+        return None if self.stability is None else self.stability.stable
+
+    @property
+    def stable_end_held(self) -> bool | None:
+        """Eq. (23): stable with the task frame held in every task component (None if not evaluated)."""
+        return None if self.stability_end_held is None else self.stability_end_held.stable
+
+    def residual(self) -> float:
+        """Largest residual (mixed units; 0 at an exact equilibrium)."""
+        return float(max(self.residuals.values())) if self.residuals else float("nan")
+
+
+@dataclass
+class _State:
+    """Everything one Newton iteration needs at one configuration (internal)."""
+
+    end: object
+    cstate: object
+    grad: np.ndarray  # ∇Π (free order)
+    tau: np.ndarray
+    load_force: np.ndarray  # generalised force of every dead load incl. the loaded task wrench
+    a: np.ndarray  # stacked constraint Jacobian (closure rows, held rows), free columns
+    b: np.ndarray  # its right-hand side (A δz = b)
+    bscale: np.ndarray  # per row: L_c for metres, 1 for radians
+    indep: np.ndarray
+    redundant: tuple[int, ...]
+    y: np.ndarray
+    z: np.ndarray
+    rr: np.ndarray
+    nu: np.ndarray  # min-norm multipliers, all rows
+    nu_i: np.ndarray  # multipliers on the independent rows
+    r: np.ndarray  # stationarity residual
+    w6: np.ndarray
+    dload: np.ndarray | None  # ∂Q/∂z (free block), hessian=True only
+
+
+def _null_basis(a: np.ndarray, rtol: float) -> tuple[np.ndarray, int]:
+    """Orthonormal basis of the null space of ``a`` (rows normalised first, rank as
+    :func:`~vjm_pin.closures.constraint_rank`) and the rank."""
+    n = a.shape[1]
+    if a.shape[0] == 0:
+        return np.eye(n), 0
+    info = constraint_rank(a, rtol=rtol)
+    norms = np.linalg.norm(a, axis=1)
+    keep = norms > 0
+    s = np.zeros_like(a)
+    s[keep] = a[keep] / norms[keep, None]
+    _, _, vt = np.linalg.svd(s, full_matrices=True)
+    return vt[info.rank :].T.copy(), info.rank
+
+
+def _verdict(w: np.ndarray, z: np.ndarray, thr: float) -> StabilityResult:
+    """Eq. (23) form: eigenvalues of the symmetric part of ``−ZᵀWZ``; stable iff all < −thr."""
+    red = -(z.T @ w @ z)
+    ev = np.linalg.eigvalsh(0.5 * (red + red.T)) if red.size else np.zeros(0)
+    return StabilityResult(bool(ev.size == 0 or ev.max() < -thr), ev, z.shape[1], float(thr))
+
+
+class MechanismSolver:
+    """Equilibrium, stability and loaded stiffness of a mechanism (module docstring).
+
+    Args:
+        vm: The model (its ``closures``, springs, roles and task).
+        loads: Dead loads anywhere (:class:`~vjm_pin.dead_loads.Load`, world axes).
+        gravity: (3,) gravity (m/s²) for the link weights, or None.
+        tol: Relative tolerance (1e-15…1e-4): constraint residuals ≤ 0.01·tol·L_c (m) and
+            0.01·tol (rad), statics ≤ tol × max(|K_θ(θ−θ₀)|, |loads|, 1e-6·|K_θ|).
+        max_iter: Iterations per attempt. restarts: perturbed restarts after failure.
+        perturbation: Restart noise (rad; ×1e-3·L_c for prismatic coordinates). seed: its seed.
+        follow_stable: Prefer stable equilibria (shifted descent steps, saddle escape).
+        rank_rtol: Relative tolerance of the constraint rank (:func:`constraint_rank`).
+    """
+
+    def __init__(
+        self,
+        vm: VjmModel,
+        loads: Sequence[Load] = (),
+        gravity=None,
+        *,
+        tol: float = 1e-10,
+        max_iter: int = 60,
+        restarts: int = 2,
+        perturbation: float = 1e-3,
+        seed: int = 0,
+        follow_stable: bool = True,
+        rank_rtol: float = RANK_RTOL,
+    ):
+        if not isinstance(vm, VjmModel):
+            raise InputError(f"vm must be a VjmModel, got {type(vm).__name__}")
+        for name, v, lo, hi in (("tol", tol, 1e-15, 1e-4), ("perturbation", perturbation, 1e-12, 1.0),
+                                ("rank_rtol", rank_rtol, 1e-16, 1e-2)):
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not lo <= v <= hi:
+                raise InputError(f"{name} must be a number in [{lo:g}, {hi:g}]; got {v!r}")
+        for name, v, lo, hi in (("max_iter", max_iter, 1, 100_000), ("restarts", restarts, 0, 1000),
+                                ("seed", seed, 0, 2**63 - 1)):
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not lo <= v <= hi:
+                raise InputError(f"{name} must be an integer in [{lo}, {hi}]; got {v!r}")
+        self.vm = vm
+        self.tol, self.max_iter, self.restarts = float(tol), int(max_iter), int(restarts)
+        self.perturbation, self.seed, self.follow_stable = float(perturbation), int(seed), bool(follow_stable)
+        self.rank_rtol = float(rank_rtol)
+        model = vm.model
+        if isinstance(loads, Load):
+            loads = (loads,)
+        loads = tuple(loads)
+        probe_c = ClosureSet(vm)
+        probe_l = DeadLoads(vm, loads, None)
+        ids = [vm.frame_id, *probe_c.frame_ids, *probe_l.frame_ids]
+        self.frames = FrameKinematics(model, ids)
+        self.closures = ClosureSet(vm, frames=self.frames)
+        self.loads = DeadLoads(vm, loads, gravity, frames=self.frames)
+        self._gravity_only = DeadLoads(vm, (), gravity) if self.loads.gravity is not None else None
+        self.task = list(vm.task)
+        self.free = np.concatenate([vm.theta_idx, vm.q_idx]).astype(int)
+        self.nt = vm.n_theta
+        n = len(self.free)
+        ref = self.frames.evaluate(vm.reference, hessian=False)
+        end0 = ref[vm.frame_id]
+        self.p0, self.r0 = end0.position.copy(), end0.rotation.copy()
+        self._load_ref = [(ref[f].position.copy(), ref[f].rotation.copy()) for f in self.loads.load_frame_ids]
+        data = model.createData()
+        pin.forwardKinematics(model, data, vm.reference)
+        pts = [m.translation for m in data.oMi[1:]] + [self.p0]
+        self.length_scale = max(max(np.linalg.norm(p - self.p0) for p in pts), 1e-3)
+        prism = np.array([model.joints[i + 1].shortname().startswith("JointModelP") for i in range(model.nv)])
+        self.var_scale = np.where(prism[self.free], self.length_scale, 1.0) if n else np.zeros(0)
+        self._prism = prism[self.free] if n else np.zeros(0, bool)
+        self.kscale = float(np.abs(vm.K_theta).max()) if vm.K_theta.size else 1.0
+        self.kz = np.zeros((n, n))
+        self.kz[: self.nt, : self.nt] = vm.K_theta
+        self.threshold = STABILITY_TOL * (spectral_norm(vm.K_theta) if vm.K_theta.size else 1.0)
+        self.closure_labels = self.closures.labels
+        self._cscale = np.array(
+            [self.length_scale if c in ("x", "y", "z") else 1.0 for cl in self.closures.closures for c in cl.components]
+        )
+
+    # ----------------------------------------------------------------- inputs
+    def components(self, spec) -> tuple[int, ...]:
+        """Task component indices (task order) from names or indices 0..5."""
+        if spec is None:
+            return ()
+        items = spec.split() if isinstance(spec, str) else list(spec)
+        out = set()
+        for c in items:
+            if isinstance(c, str) and c in COMPONENTS:
+                c = COMPONENTS.index(c)
+            elif not (isinstance(c, (int, np.integer)) and not isinstance(c, bool) and 0 <= c < 6):
+                raise InputError(f"task components are names ({' '.join(COMPONENTS)}) or indices 0..5; got {c!r}")
+            if int(c) not in self.task:
+                raise InputError(
+                    f"component {COMPONENTS[int(c)]} is not in the task of this model ({' '.join(self.vm.task_names)})"
+                )
+            out.add(int(c))
+        return tuple(c for c in self.task if c in out)
+
+    def _vector6(self, v, name: str, unit: str) -> np.ndarray:
+        a = np.asarray(v, dtype=float).ravel()
+        m = len(self.task)
+        if a.size == 6:
+            out = a.copy()
+        elif a.size == 3:
+            out = np.concatenate([a, np.zeros(3)])
+        elif a.size == m:
+            out = np.zeros(6)
+            out[self.task] = a
+        else:
+            raise InputError(f"{name} must have 3, 6 or {m} (task) components ({unit}), got {a.size}")
+        if not np.all(np.isfinite(out)):
+            raise InputError(f"{name} contains NaN or infinite values: {a.tolist()}")
+        return out
+
+    # ----------------------------------------------------------------- evaluation
+    def energy(self, x: np.ndarray) -> float:
+        """Spring energy ½(θ−θ₀)ᵀK_θ(θ−θ₀) (J)."""
+        d = x[self.vm.theta_idx] - self.vm.theta0
+        return 0.5 * float(d @ self.vm.K_theta @ d)
+
+    def _potential(self, x, end, lrows, w_dead, factor) -> float:
+        """Total potential (J): springs minus the work of the loads (a moment's work through
+        ``log3(R R0ᵀ)``, exact for forces; a dead moment has no exact potential in 3-D)."""
+        pot = self.energy(x)
+        tl = np.asarray(self.task, int)[lrows]
+        if tl.size:
+            d = deflection(self.p0, self.r0, end.position, end.rotation)
+            pot -= float(w_dead[tl] @ d[tl])
+        if factor:
+            states = self.frames.evaluate(x, hessian=False)
+            for ld, fid, (p0, r0) in zip(self.loads.loads, self.loads.load_frame_ids, self._load_ref):
+                st = states[fid]
+                pot -= factor * float(ld.wrench[:3] @ (st.position - p0))
+                if np.any(ld.wrench[3:]):
+                    pot -= factor * float(ld.wrench[3:] @ pin.log3(st.rotation @ r0.T))
+            if self._gravity_only is not None:
+                pot += factor * float(self._gravity_only.evaluate(x, hessian=False).potential)
+        return pot
+
+    def _state(self, x, hrows, w_dead, p_t, r_t, factor, hessian) -> _State:
+        vm, free = self.vm, self.free
+        tarr = np.asarray(self.task, int)
+        hcomp = tarr[np.asarray(hrows, int)]
+        lcomp = np.array([c for c in tarr if c not in set(hcomp.tolist())], int)
+        states = self.frames.evaluate(x, hessian=hessian)
+        end = states[vm.frame_id]
+        cst = self.closures.evaluate(x, hessian=hessian)
+        lst = self.loads.evaluate(x, hessian=hessian)
+        n = len(free)
+        tau = np.zeros(n)
+        tau[: self.nt] = vm.K_theta @ (x[vm.theta_idx] - vm.theta0)
+        jz = end.jacobian[:, free]
+        wl = np.zeros(6)
+        wl[lcomp] = w_dead[lcomp]
+        qload = factor * lst.force[free] + jz.T @ wl
+        grad = tau - qload
+        a = np.vstack([cst.jacobian[:, free], jz[hcomp]])
+        e = pose_error(p_t, r_t, end.position, end.rotation)[hcomp]
+        b = np.concatenate([-cst.residual, e])
+        bscale = np.concatenate([self._cscale, np.where(hcomp < 3, self.length_scale, 1.0)])
+        k = a.shape[0]
+        if k:
+            info = constraint_rank(a, rtol=self.rank_rtol)
+            indep = np.array(sorted(info.independent), int)
+            redundant = info.redundant
+        else:
+            indep, redundant = np.zeros(0, int), ()
+        ki = len(indep)
+        if ki:
+            q, rm = np.linalg.qr(a[indep].T, mode="complete")
+            y, z, rr = q[:, :ki], q[:, ki:], rm[:ki]
+            with np.errstate(all="ignore"):
+                nu_i = np.linalg.solve(rr, y.T @ grad)
+        else:
+            y, z, rr, nu_i = np.zeros((n, 0)), np.eye(n), np.zeros((0, 0)), np.zeros(0)
+        r = grad - a[indep].T @ nu_i if ki else grad.copy()
+        nu = np.zeros(k)
+        if ki:
+            nu[indep] = nu_i
+            if redundant:  # the minimum-norm set carrying the same generalised force
+                u, s, vt = np.linalg.svd(a.T, full_matrices=False)
+                g = a[indep].T @ nu_i
+                nu = vt[:ki].T @ ((u[:, :ki].T @ g) / s[:ki])
+        w6 = wl.copy()
+        w6[hcomp] = nu[cst.residual.size :]
+        dload = None
+        if hessian:
+            dload = factor * lst.derivative[np.ix_(free, free)]
+        return _State(end, cst, grad, tau, qload, a, b, bscale, indep, redundant, y, z, rr, nu, nu_i, r, w6, dload)
+
+    def _hessian(self, s: _State) -> np.ndarray:
+        """``W = K − ∂Q/∂z − H(w) − Σ μ_k ∂²c_k/∂z²`` (free block)."""
+        free = self.free
+        nc = s.cstate.residual.size
+        hend = contract_hessian(s.end.hessian, s.w6)[np.ix_(free, free)]
+        w = self.kz - s.dload - hend
+        if nc:
+            w = w - s.cstate.hessian(s.nu[:nc])[np.ix_(free, free)]
+        return w
+
+    # ----------------------------------------------------------------- Newton
+    def _newton(self, x, hrows, w_dead, p_t, r_t, factor, max_iter, local=False):
+        """Returns (x, iterations, converged, state)."""
+        tol, lc = self.tol, self.length_scale
+        kscale = max(self.kscale, 1e-300)
+        shift = SHIFT_TOL * kscale
+        lrows = [i for i in range(len(self.task)) if i not in set(hrows)]
+        x = np.array(x, float)
+        polish = escapes = 0
+        kkt_prev = np.inf
+        s = rho_prev = None
+        for it in range(max_iter + 1 + POLISH_ITERATIONS):
+            s = self._state(x, hrows, w_dead, p_t, r_t, factor, True)
+            if not (np.all(np.isfinite(s.nu)) and np.all(np.isfinite(s.r))):
+                return x, it, False, s
+            ab = np.abs(s.b)
+            pos = self._is_position_row(hrows)
+            ep = ab[pos].max() if pos.any() else 0.0
+            er = ab[~pos].max() if (~pos).any() else 0.0
+            stat_scale = max(np.abs(s.tau).max() if s.tau.size else 0.0,
+                             np.abs(s.load_force).max() if s.load_force.size else 0.0,
+                             np.abs(s.a.T @ s.nu).max() if s.a.size else 0.0, 1e-6 * self.kscale)
+            rs = np.abs(s.r).max() if s.r.size else 0.0
+            conv = ep <= 0.01 * tol * lc and er <= 0.01 * tol and rs <= tol * stat_scale
+            wm = self._hessian(s)
+            red = s.z.T @ wm @ s.z
+            lmin = np.linalg.eigvalsh(0.5 * (red + red.T)).min() if red.size else np.inf
+            modified = False
+            if self.follow_stable and not local and lmin < shift:
+                # mirror a negative curvature (min eigenvalue |λ_min| + shift): a near-singular
+                # shifted matrix would send the step along the softest mode at full length
+                red = red + (shift - lmin + max(-lmin, 0.0)) * np.eye(red.shape[0])
+                modified = True
+            bi = s.b[s.indep]
+            with np.errstate(all="ignore"):
+                try:
+                    py = np.linalg.solve(s.rr.T, bi) if bi.size else np.zeros(0)
+                    dy = s.y @ py
+                    pz = np.linalg.solve(red, -s.z.T @ (s.r + wm @ dy)) if red.size else np.zeros(0)
+                except np.linalg.LinAlgError:
+                    return x, it, False, s
+                dx = dy + s.z @ pz
+            if not np.all(np.isfinite(dx)):
+                return x, it, False, s
+            smax = np.abs(dx / self.var_scale).max() if dx.size else 0.0
+            if not conv and not modified and smax <= POLISH_STEP:  # the rounding floor
+                conv = ep <= 0.01 * tol * lc and er <= 0.01 * tol and rs <= 1e3 * tol * stat_scale
+            if conv and modified and not local and escapes < 2 and lmin < -self.threshold:
+                escapes += 1  # a saddle reached by descent: leave along the most negative curvature
+                sym = s.z.T @ wm @ s.z
+                _, vec = np.linalg.eigh(0.5 * (sym + sym.T))
+                v = s.z @ vec[:, 0]
+                x = x.copy()
+                x[self.free] += v * (MAX_STEP / max(np.abs(v / self.var_scale).max(), 1e-300))
+                kkt_prev = np.inf
+                continue
+            if conv:
+                if modified or polish >= POLISH_ITERATIONS or smax <= POLISH_STEP:
+                    return x, it, True, s
+                polish += 1
+                x = x.copy()
+                x[self.free] += dx
+                continue
+            if it - polish >= max_iter:
+                break
+            kkt0 = float(np.linalg.norm(s.b / s.bscale) + np.linalg.norm(s.r) / kscale)
+            if local:
+                if not (smax <= MAX_STEP and kkt0 < 0.5 * kkt_prev):
+                    return x, it, False, s
+                kkt_prev = kkt0
+                x = x.copy()
+                x[self.free] += dx
+                continue
+            if smax > MAX_STEP:
+                dx = dx * (MAX_STEP / smax)
+                modified = True
+            # ℓ₁ penalty weights above the current and the step's multipliers (exact penalty),
+            # never decreasing along the attempt
+            nu_all = np.zeros(len(s.b))
+            nu_all[s.indep] = np.abs(s.nu_i)
+            if s.indep.size:
+                with np.errstate(all="ignore"):
+                    nu_new = np.linalg.solve(s.rr, s.y.T @ (s.grad + wm @ dx))
+                if np.all(np.isfinite(nu_new)):
+                    nu_all[s.indep] = np.maximum(nu_all[s.indep], np.abs(nu_new))
+            rho = 2.0 * nu_all + 1e-9 * stat_scale / s.bscale
+            if rho_prev is not None and rho_prev.shape == rho.shape:
+                rho = np.maximum(rho, rho_prev)
+            rho_prev = rho
+            phi0 = self._potential(x, s.end, lrows, w_dead, factor) + float(rho @ ab)
+            slope = min(float(s.grad @ dx) - float(rho @ ab), 0.0)
+            noise = 1e-13 * (abs(phi0) + self.energy(x) + 1e-300)
+            alpha, accepted = 1.0, False
+            for _ in range(40):
+                xn = x.copy()
+                xn[self.free] += alpha * dx
+                end_n, bn = self._trial(xn, hrows, p_t, r_t)
+                if np.all(np.isfinite(bn)):
+                    if not self.follow_stable or self._potential(xn, end_n, lrows, w_dead, factor) + float(
+                        rho @ np.abs(bn)
+                    ) <= (phi0 + 1e-4 * alpha * slope + noise):
+                        accepted = True
+                    elif alpha == 1.0 and not modified:
+                        sn = self._state(xn, hrows, w_dead, p_t, r_t, factor, False)
+                        kn = float(np.linalg.norm(sn.b / sn.bscale) + np.linalg.norm(sn.r) / kscale)
+                        accepted = kn < 0.5 * kkt0
+                if accepted:
+                    break
+                alpha *= 0.5
+            if not accepted:
+                return x, it + 1, False, s
+            x = xn
+        return x, max_iter, False, s
+
+    def _trial(self, x, hrows, p_t, r_t):
+        """The task-frame state and the constraint right-hand side ``b`` at a trial point."""
+        end = self.frames.evaluate(x, hessian=False)[self.vm.frame_id]
+        cst = self.closures.evaluate(x, hessian=False)
+        hcomp = np.asarray(self.task, int)[np.asarray(hrows, int)]
+        e = pose_error(p_t, r_t, end.position, end.rotation)[hcomp]
+        return end, np.concatenate([-cst.residual, e])
+
+    def _is_position_row(self, hrows) -> np.ndarray:
+        hc = np.asarray(self.task, int)[np.asarray(hrows, int)]
+        cp = np.array([c in ("x", "y", "z") for cl in self.closures.closures for c in cl.components], bool)
+        return np.concatenate([cp, hc < 3])
+
+    def _perturb(self, x, rng) -> np.ndarray:
+        xn = x.copy()
+        noise = rng.standard_normal(len(self.free)) * self.perturbation
+        xn[self.free] += np.where(self._prism, noise * 1e-3 * self.length_scale, noise)
+        return xn
+
+    # ----------------------------------------------------------------- solve
+    @one_blas_thread
+    def solve(self, deflection=None, wrench=None, held=None, *, x0=None, raise_on_failure: bool = True) -> MechanismResult:
+        """Equilibrium of the mechanism under mixed control.
+
+        Args:
+            deflection: Prescribed task deflection (m, world rotation vector rad): 6, 3 or
+                ``len(task)`` numbers; non-zero only on held components.
+            wrench: Dead task wrench (N at the task-frame origin, N·m; world axes): 6, 3 or
+                ``len(task)`` numbers; non-zero only on loaded components.
+            held: Held task components (names or 0..5); the others are loaded. Default:
+                every component held when ``wrench`` is None, none when ``deflection`` is None
+                and ``wrench`` given; required when both are given.
+            x0: Starting configuration (nq,), assembled or near it; default the reference.
+            raise_on_failure: Raise :class:`NoEquilibrium` when nothing converges.
+
+        Returns:
+            :class:`MechanismResult` (both verdicts; redundant rows; min-norm multipliers).
+        """
+        if held is None:
+            if wrench is None:
+                held = tuple(self.task)
+            elif deflection is None:
+                held = ()
+            else:
+                raise InputError("both a deflection and a wrench given: say which task components are held")
+        hcomp = self.components(held)
+        d = np.zeros(6) if deflection is None else self._vector6(deflection, "deflection", "m, rad")
+        w = np.zeros(6) if wrench is None else self._vector6(wrench, "wrench", "N, N·m")
+        outside = [COMPONENTS[i] for i in range(6) if i not in self.task and (d[i] or w[i])]
+        if outside:
+            raise InputError(
+                f"components {outside} are not in the task of this model ({' '.join(self.vm.task_names)})"
+            )
+        bad = [COMPONENTS[c] for c in self.task if c not in hcomp and d[c]]
+        if bad:
+            raise InputError(f"deflection prescribed on loaded components {bad}: hold them, or prescribe their wrench")
+        bad = [COMPONENTS[c] for c in hcomp if w[c]]
+        if bad:
+            raise InputError(f"wrench prescribed on held components {bad}: their wrench is the reaction")
+        x = self.vm.reference.copy() if x0 is None else np.asarray(x0, float).ravel().copy()
+        if x.shape != (self.vm.model.nq,) or not np.all(np.isfinite(x)):
+            raise InputError(f"x0 must be a finite configuration of size {self.vm.model.nq}")
+        hrows = [self.task.index(c) for c in hcomp]
+        res = self._rotation_targets(d, hcomp, hrows, w, x)
+        if not res.converged and raise_on_failure:
+            names = " ".join(COMPONENTS[c] for c in hcomp) or "none"
+            raise NoEquilibrium(
+                f"no equilibrium of the mechanism found (held: {names}; task wrench {np.round(w, 9).tolist()}; "
+                f"{len(self.loads.loads)} dead load(s)) after {res.iterations} iterations (residuals {res.residuals})",
+                res,
+                res.residual(),
+            )
+        return res
+
+    def _rotation_targets(self, d, hcomp, hrows, w, x0) -> MechanismResult:
+        """Held rows of ``log3(R_t Rᵀ)`` with ``R_t = exp3(d̂) R0``; with some but not all
+        rotations held, ``d̂`` is corrected until the reported ``log3(R R0ᵀ)`` meets ``d`` in the
+        held components (as :meth:`EquilibriumSolver._rotation_targets`)."""
+        p, r = displace(self.p0, self.r0, d)
+        res = self._solve_target(p, r, hrows, w, x0)
+        hrot = [c for c in hcomp if c >= 3]
+        if not (0 < len(hrot) < 3):
+            return res
+        other = [c for c in (3, 4, 5) if c not in hrot]
+        dh = np.array(d, float)
+        total, prev = res.iterations, np.inf
+        for _ in range(ROTATION_TARGET_ITER):
+            if not res.converged:
+                break
+            err = d[hrot] - res.deflection[hrot]
+            size = np.abs(err).max()
+            if size <= 0.1 * ROTATION_TARGET_TOL or (size <= ROTATION_TARGET_TOL and size > 0.5 * prev):
+                break
+            prev = size
+            dh[hrot] += err
+            dh[other] = res.deflection[other]
+            p, r = displace(self.p0, self.r0, dh)
+            res = self._solve_target(p, r, hrows, w, res.x)
+            total += res.iterations
+        return replace(res, iterations=total)
+
+    def _solve_target(self, p_t, r_t, hrows, w_dead, x_start) -> MechanismResult:
+        total = 0
+        label = "newton"
+        x, it, ok, _ = self._newton(x_start, hrows, w_dead, p_t, r_t, 1.0, LOCAL_MAX_ITER, local=True)
+        total += it
+        if not ok:
+            x, it, ok, _ = self._newton(x_start, hrows, w_dead, p_t, r_t, 1.0, DESCENT_ITER_FACTOR * self.max_iter)
+            total += it
+            label += "+descent"
+        if not ok:
+            rng = np.random.default_rng(self.seed)
+            ps = self.frames.evaluate(x_start, hessian=False)[self.vm.frame_id]
+            dlog = pin.log3(r_t @ ps.rotation.T)
+            starts = [x_start] + [self._perturb(x_start, rng) for _ in range(self.restarts)]
+            for si, xs in enumerate(starts):
+                for nsteps in (4, 16) if si == 0 else (1, 4, 16):
+                    xc, okc = xs.copy(), True
+                    for k in range(1, nsteps + 1):
+                        a = k / nsteps
+                        pk = (1 - a) * ps.position + a * p_t
+                        rk = pin.exp3(a * dlog) @ ps.rotation
+                        xc, itc, okc, _ = self._newton(xc, hrows, a * w_dead, pk, rk, a, self.max_iter)
+                        total += itc
+                        if not okc:
+                            break
+                    if okc:
+                        x, ok = xc, True
+                        label += (f"+restart({si})" if si else "") + f"+continuation({nsteps})"
+                        break
+                if ok:
+                    break
+        return self._result(x, total, ok, hrows, w_dead, p_t, r_t, label)
+
+    def _result(self, x, iters, ok, hrows, w_dead, p_t, r_t, path) -> MechanismResult:
+        vm = self.vm
+        s = self._state(x, hrows, w_dead, p_t, r_t, 1.0, True)
+        nc = s.cstate.residual.size
+        tarr = np.asarray(self.task, int)
+        hcomp = tarr[np.asarray(hrows, int)]
+        pos = self._is_position_row(hrows)
+        ab = np.abs(s.b)
+        rabs = np.abs(s.r)
+
+        def top(v, mask):
+            return float(v[mask].max()) if np.any(mask) else 0.0
+
+        cmask = np.arange(len(ab)) < nc
+        res = {
+            "position": top(ab, pos & ~cmask),
+            "orientation": top(ab, ~pos & ~cmask),
+            "closure_position": top(ab, pos & cmask),
+            "closure_orientation": top(ab, ~pos & cmask),
+            "statics": top(rabs, ~self._prism),
+            "statics_prismatic": top(rabs, self._prism),
+        }
+        labels = tuple(self.closure_labels) + tuple(f"task.{COMPONENTS[c]}" for c in hcomp)
+        redundant = tuple(labels[i] for i in s.redundant)
+        note = (
+            MULTIPLIERS_NOTE.format(n=len(redundant), labels=", ".join(redundant)) if redundant else None
+        )
+        stab = end = None
+        warnings: tuple[str, ...] = ()
+        if ok:
+            wm = self._hessian(s)
+            z, _ = _null_basis(s.a, self.rank_rtol)
+            stab = _verdict(wm, z, self.threshold)
+            jall = s.end.jacobian[:, self.free][tarr]
+            z_end, _ = _null_basis(np.vstack([s.cstate.jacobian[:, self.free], jall]), self.rank_rtol)
+            end = _verdict(wm, z_end, self.threshold)
+            if not stab.stable:
+                warnings = (
+                    "unstable under the prescribed control: the mechanism would move away from this equilibrium"
+                    + ("; stable with the task frame held (eq. 23)" if end.stable else ""),
+                )
+        mu = s.nu[:nc].copy()
+        return MechanismResult(
+            x=x.copy(),
+            q=x[vm.q_idx].copy(),
+            theta=x[vm.theta_idx].copy(),
+            wrench=s.w6.copy(),
+            closure_multipliers=mu,
+            closure_labels=tuple(self.closure_labels),
+            reaction_wrenches=s.cstate.reaction_wrenches(mu) if nc else {},
+            deflection=deflection(self.p0, self.r0, s.end.position, s.end.rotation),
+            position=s.end.position.copy(),
+            rotation=s.end.rotation.copy(),
+            converged=bool(ok),
+            iterations=int(iters),
+            residuals=res,
+            energy=self.energy(x),
+            path=path,
+            held=tuple(int(c) for c in hcomp),
+            stability=stab,
+            stability_end_held=end,
+            redundant=redundant,
+            multipliers_note=note,
+            warnings=warnings,
+        )
+
+    # ----------------------------------------------------------------- stiffness
+    @one_blas_thread
+    def stiffness(self, res: MechanismResult) -> StiffnessResult:
+        """Loaded Cartesian stiffness K_C of the task frame at the equilibrium ``res`` (eq. 28
+        bordered with the independent closure rows; every task row is an output)::
+
+            [[0, 0, J], [0, 0, C_I], [Jᵀ, C_Iᵀ, −W]] [δw; δμ; δz] = [δt; 0; 0]
+
+        ``W`` as in the Newton iteration, with the total task wrench of ``res`` and its
+        closure multipliers. Returns a :class:`StiffnessResult` (``method="eq28-closures"``;
+        ``dq_dt``/``dtheta_dt`` the passive/spring sensitivities).
+
+        Raises:
+            NoEquilibrium: ``res`` did not converge.
+            SingularStiffness: a task row depends on the closure rows (the task frame cannot move
+                that way: infinite stiffness), or the matrix is singular (a critical point).
+        """
+        if not res.converged:
+            raise NoEquilibrium("loaded stiffness of an equilibrium that did not converge", res, res.residual())
+        vm, free = self.vm, self.free
+        tarr = np.asarray(self.task, int)
+        x = np.asarray(res.x, float)
+        states = self.frames.evaluate(x, hessian=True)
+        end = states[vm.frame_id]
+        cst = self.closures.evaluate(x, hessian=True)
+        lst = self.loads.evaluate(x, hessian=True)
+        nc = cst.residual.size
+        c = cst.jacobian[:, free]
+        j = end.jacobian[tarr][:, free]
+        stacked = np.vstack([c, j])
+        m = len(tarr)
+        info = constraint_rank(stacked, rtol=self.rank_rtol)
+        lost = [i - nc for i in info.redundant if i >= nc]
+        if lost:
+            raise SingularStiffness(
+                "K_C is infinite along task component(s) "
+                f"{' '.join(COMPONENTS[tarr[i]] for i in lost)}: the closures fix the task frame there to first order",
+                info.singular_values,
+            )
+        ci = c[[i for i in info.independent if i < nc]] if nc else np.zeros((0, len(free)))
+        w = self.kz - lst.derivative[np.ix_(free, free)] - contract_hessian(end.hessian, res.wrench)[np.ix_(free, free)]
+        if nc:
+            w = w - cst.hessian(res.closure_multipliers)[np.ix_(free, free)]
+        k, n = ci.shape[0], len(free)
+        big = np.zeros((m + k + n, m + k + n))
+        big[:m, m + k :] = j
+        big[m : m + k, m + k :] = ci
+        big[m + k :, :m] = j.T
+        big[m + k :, m : m + k] = ci.T
+        big[m + k :, m + k :] = -w
+        rhs = np.zeros((m + k + n, m))
+        rhs[:m] = np.eye(m)
+        if _rcond(big) < SINGULAR_RCOND:  # judged on the equilibrated matrix (units mix)
+            sv = np.linalg.svd(big, compute_uv=False)
+            raise SingularStiffness(
+                "the bordered matrix of eq. (28) with the closure rows is singular: the equilibrium is at a "
+                "critical point (bifurcation/buckling) of the loaded mechanism",
+                sv,
+            )
+        sol = np.linalg.solve(big, rhs)
+        kc, dz = sol[:m], sol[m + k :]
+        k6 = np.zeros((6, 6))
+        k6[np.ix_(tarr, tarr)] = kc
+        dt6 = np.zeros((n, 6))
+        dt6[:, tarr] = dz
+        return StiffnessResult(k6, dt6[self.nt :], dt6[: self.nt], "eq28-closures", tuple(self.task))
+
+
+__all__ = ["MechanismResult", "MechanismSolver"]
