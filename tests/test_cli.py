@@ -64,10 +64,10 @@ def test_curve_matrices_match_analyze_on_the_traced_state(capsys):
     vm = resolve_model("paper-c-s")
     curve = trace_curve(vm, [-1, 0, 0], 0.002, 4)
     last = curve.points[-1]
-    k_cli = np.array(out["points"][-1]["stiffness_matrix"])
+    k_cli = np.array(out["points"][-1]["stiffness"])
     assert np.allclose(k_cli, loaded_stiffness(vm, last.equilibrium).stiffness, rtol=1e-8, atol=1e-12)
     # the directional stiffness reported for the point is dᵀ K_C d
-    assert out["points"][-1]["stiffness"] == pytest.approx(k_cli[0, 0], rel=1e-8)
+    assert out["points"][-1]["stiffness_along"] == pytest.approx(k_cli[0, 0], rel=1e-8)
 
 
 def test_analyze_subdivide_refines_the_model(capsys):

@@ -289,7 +289,7 @@ def test_cli_curve_json_and_plot(tmp_path, capsys):
     data = json.loads(capsys.readouterr().out)
     assert set(data) >= {"points", "critical", "branches"}
     assert len(data["points"]) == 6
-    assert set(data["points"][1]) >= {"deflection", "force", "wrench", "stable", "stiffness"}
+    assert set(data["points"][1]) >= {"deflection", "force", "wrench", "stable", "stiffness_along"}
     (c,) = data["critical"]
     assert set(c) >= {"force", "deflection", "stiffness_before", "stiffness_after"}
     assert abs(c["force"] - 1.0) < 1e-4

@@ -282,7 +282,7 @@ def test_cli_analyze_and_curve_on_the_orthoglide(capsys):
     assert len(cur["points"]) == 3 and cur["critical"] == []  # 1 mm < Δ_cr ≈ 1.5 mm
     assert cur["points"][2]["legs"][0]["name"] == "leg1"
     assert cur["points"][2]["force"] == pytest.approx(3.2e6 * 1e-3, rel=0.02)
-    assert cur["free"] is True and cur["stopped"] == ""
+    assert cur["free"] is True and cur["stopped"] is None
     assert main(["analyze", "orthoglide-q0", "--payload", "1"]) == 2
     assert "parallel model" in capsys.readouterr().err
 

@@ -244,8 +244,8 @@ def test_cli_analyze_robot_json_and_human(capsys):
     k6 = np.asarray(out["stiffness"])
     d = np.asarray(w["direction"])
     # the end free to rotate: the stiffness a force along d meets, 1 / (dᵀ C_tt d)
-    assert 1.0 / (d @ np.linalg.inv(k6)[:3, :3] @ d) == pytest.approx(w["stiffness"], rel=1e-8)
-    assert w["stiffness"] < w["stiffness_rotations_held"] <= d @ k6[:3, :3] @ d
+    assert 1.0 / (d @ np.linalg.inv(k6)[:3, :3] @ d) == pytest.approx(w["stiffness_along"], rel=1e-8)
+    assert w["stiffness_along"] < w["stiffness_along_rotations_held"] <= d @ k6[:3, :3] @ d
     assert main(args) == 0
     text = capsys.readouterr().out
     dz = res.deflection[2] * 1e3

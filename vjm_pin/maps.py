@@ -182,6 +182,23 @@ def grid_poses(vm: VjmModel, grid: dict) -> tuple[list[str], np.ndarray]:
 
 # ----------------------------------------------------------------------------- one pose
 _MODEL_CACHE: dict = {}
+#: One Kinematics (one pin.Data) per Pinocchio model and end frame in this process: every
+#: pose of a map shares the model (``with_positions`` changes only the reference), so a
+#: worker creates its Pinocchio workspace once, not once per pose (issue 14).
+_KIN_CACHE: dict = {}
+
+
+def _shared_kinematics(model, frame_id: int):
+    from .kinematics import Kinematics
+
+    key = (id(model), int(frame_id))
+    hit = _KIN_CACHE.get(key)
+    if hit is None or hit[0] is not model:
+        if len(_KIN_CACHE) >= 8:
+            _KIN_CACHE.clear()
+        hit = (model, Kinematics(model, frame_id))  # the model is kept: its id stays unique
+        _KIN_CACHE[key] = hit
+    return hit[1]
 
 
 def _model_from_text(text: str) -> VjmModel:
@@ -200,12 +217,19 @@ def evaluate_pose(vm: VjmModel, names, values, wrench, gravity=None, method: str
     """Deflection and stiffness indices of ``vm`` at the pose ``names = values`` under the
     end ``wrench`` (6,) and, if ``gravity`` (3,) is given, the link weights. Never raises
     for a pose that cannot be analysed: ``status`` says why."""
+    from .solver.threads import single_blas_thread
+
+    with single_blas_thread():  # one BLAS thread inside (vjm_pin.solver.threads)
+        return _evaluate_pose(vm, names, values, wrench, gravity, method)
+
+
+def _evaluate_pose(vm: VjmModel, names, values, wrench, gravity, method) -> dict:
     from .exceptions import NoEquilibrium, SingularStiffness
-    from .kinematics import Kinematics
     from .solver import EquilibriumSolver, loaded_stiffness
 
     v = vm.with_positions(dict(zip(names, (float(x) for x in values))))
-    p0, _ = Kinematics(v.model, v.frame_id).placement(v.reference)
+    kin = _shared_kinematics(v.model, v.frame_id)
+    p0, _ = kin.placement(v.reference)
     row = {
         "p0": p0,
         "deflection": np.full(6, np.nan),
@@ -220,7 +244,7 @@ def evaluate_pose(vm: VjmModel, names, values, wrench, gravity=None, method: str
             from .loads import LinkLoads, solve_loaded
 
             loads = None if gravity is None else LinkLoads(np.asarray(gravity, float))
-            eq = solve_loaded(v, w, loads, method=method)
+            eq = solve_loaded(v, w, loads, method=method, kin=kin)
             if eq.stiffness is None:
                 raise SingularStiffness("singular loaded stiffness")
             k, defl, stable = eq.stiffness.stiffness, eq.deflection, eq.stable
@@ -231,8 +255,8 @@ def evaluate_pose(vm: VjmModel, names, values, wrench, gravity=None, method: str
                 f"model '{v.name}' has passive joints: gravity maps need spring and motor joints only"
             )
         else:
-            res = EquilibriumSolver(v).solve_wrench(w)
-            k, defl, stable = loaded_stiffness(v, res, method).stiffness, res.deflection, res.stable
+            res = EquilibriumSolver(v, _kin=kin).solve_wrench(w)
+            k, defl, stable = loaded_stiffness(v, res, method, kin=kin).stiffness, res.deflection, res.stable
     except SingularStiffness:
         row["status"] = "singular"
         return row
@@ -270,10 +294,12 @@ def stiffness_indices(k6: np.ndarray, wrench: np.ndarray, task) -> tuple[float, 
 def _chunk_worker(text, names, wrench, gravity, method, chunk):
     """Evaluate a chunk of poses (runs in a worker process)."""
     from .exceptions import VjmError
+    from .solver.threads import single_blas_thread
 
     vm = _model_from_text(text)
     try:
-        return [evaluate_pose(vm, names, row, wrench, gravity, method) for row in chunk]
+        with single_blas_thread():  # once per chunk, not per pose
+            return [evaluate_pose(vm, names, row, wrench, gravity, method) for row in chunk]
     except VjmError as e:  # subclasses with extra constructor arguments do not unpickle
         raise VjmError(str(e)) from None
 
@@ -318,8 +344,8 @@ class MapResult:
             cols[f"p0_{a}_m"] = self.p0[:, i]
         for i, a in enumerate(("dx_m", "dy_m", "dz_m", "rx_rad", "ry_rad", "rz_rad")):
             cols[a] = self.deflection[:, i]
-        cols["deflection_mm"] = np.linalg.norm(self.deflection[:, :3], axis=1) * 1e3
-        cols["rotation_mrad"] = np.linalg.norm(self.deflection[:, 3:], axis=1) * 1e3
+        cols["deflection_m"] = np.linalg.norm(self.deflection[:, :3], axis=1)  # SI, as the JSON
+        cols["rotation_rad"] = np.linalg.norm(self.deflection[:, 3:], axis=1)
         cols["k_along_N_per_m"] = self.k_along
         cols["k_min_N_per_m"] = self.k_min
         cols["stable"] = self.stable

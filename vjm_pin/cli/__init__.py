@@ -5,7 +5,10 @@ and ``run(args) -> int``. The contract of :func:`main` with the shell:
 
 - exit 0 on success; a bad input (a :class:`~vjm_pin.exceptions.VjmError` or a usage
   error of the command line) prints one line ``vjm-pin: error: ...`` on stderr and exits
-  with status 2, never a traceback;
+  with status 2, never a traceback; an analysis that fails on a valid input (no
+  equilibrium, a singular stiffness, an equilibrium that fails its check, a wrench beyond
+  the buckling load: :data:`ANALYSIS_FAILURES`) prints one line the same way and exits
+  with status 3;
 - Ctrl-C at any point (imports, parsing, computation) prints ``vjm-pin: interrupted`` on
   stderr and exits with status 130 (128 + SIGINT), no traceback;
 - a stdout closed by the reader (``vjm-pin models | head -1``) ends the run quietly with
@@ -26,7 +29,22 @@ import sys
 import warnings
 
 #: Command modules, in the order ``--help`` lists them.
-COMMANDS = ("demo", "analyze", "curve", "view", "map", "models")
+COMMANDS = ("demo", "analyze", "curve", "view", "map", "models", "schema")
+
+#: Exit statuses of ``vjm-pin`` (documented in ``vjm-pin --help`` and the README).
+EXIT_OK, EXIT_USAGE, EXIT_ANALYSIS, EXIT_INTERRUPTED = 0, 2, 3, 130
+
+EPILOG = """exit status:
+  0    success (an unstable equilibrium that was found is a result, not a failure)
+  2    usage error or bad input (unknown model, malformed file, out-of-range option)
+  3    analysis failure: no equilibrium, singular stiffness, an equilibrium that fails
+       its check, a wrench beyond the buckling load
+  130  interrupted (Ctrl-C)
+
+examples:
+  vjm-pin demo --out vjm-demo
+  vjm-pin analyze paper-a-s --deflection -0.001 0 0 --json
+  vjm-pin schema curve"""
 
 #: A negative number as ``float()`` reads it: ``-1``, ``-1.5``, ``-.5``, ``-1.``, ``-1e-3``,
 #: ``-1_000``, ``-inf``, ``-nan``. argparse's own matcher knows only plain decimals and takes
@@ -81,9 +99,16 @@ def build_parser() -> argparse.ArgumentParser:
             "Pashkevich-Klimchik-Chablat 2011) on Pinocchio. Units are SI (m, rad, N, N·m) unless a "
             "command says otherwise. Output files (--plot, --html, --out) are checked before the "
             "work starts, written atomically, never over an input file, and replace an existing "
-            "file of the same name. Start with 'vjm-pin demo'."
+            "file of the same name. Start with 'vjm-pin demo'. Every --json output has a "
+            "'version' and a 'units' field and follows the JSON Schema that 'vjm-pin schema "
+            "COMMAND' prints."
         ),
+        epilog=EPILOG,
     )
+    from .common import HelpFormatter, add_verbosity_options, examples_epilog
+
+    parser.formatter_class = HelpFormatter
+    add_verbosity_options(parser)
     parser.add_argument("--version", action="version", version=f"%(prog)s {version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
@@ -94,7 +119,18 @@ def build_parser() -> argparse.ArgumentParser:
                 continue  # command not built yet
             raise
         mod.add_parser(sub)
+        p = sub.choices[name]
+        p.formatter_class = HelpFormatter
+        p.epilog = examples_epilog(mod.EXAMPLES)
+        add_verbosity_options(p, suppress=True)
     return parser
+
+
+def analysis_failures() -> tuple:
+    """The errors of an analysis that fails on a valid input (exit status 3)."""
+    from ..exceptions import NoEquilibrium, SingularStiffness
+
+    return (NoEquilibrium, SingularStiffness)  # EquilibriumCheckError is a NoEquilibrium
 
 
 def _run(argv) -> int:
@@ -106,6 +142,11 @@ def _run(argv) -> int:
         parser.print_help()
         print("\nTry 'vjm-pin demo' for the bundled example (Model C chain buckling).")
         return 0
+    import time
+
+    args._t0 = time.perf_counter()
+    if getattr(args, "quiet", False):
+        warnings.simplefilter("ignore")
     try:
         return int(args.func(args) or 0)
     except VjmError as e:
@@ -114,7 +155,7 @@ def _run(argv) -> int:
         if hint:
             msg += (" " if msg.endswith("?") else "; ") + hint
         print(f"vjm-pin: error: {msg}", file=sys.stderr)
-        return 2
+        return EXIT_ANALYSIS if isinstance(e, analysis_failures()) else EXIT_USAGE
 
 
 def _hint(e) -> str:
@@ -180,7 +221,8 @@ class _SigintWatch:
 
 def main(argv=None) -> int:
     """Entry point of the ``vjm-pin`` console script; returns the exit status (see the
-    module docstring for the contract: 0, 2 on bad input, 130 on Ctrl-C)."""
+    module docstring for the contract: 0, 2 on bad input, 3 on an analysis failure, 130 on
+    Ctrl-C)."""
     watch = _SigintWatch()
     try:
         with watch:

@@ -6,6 +6,39 @@ import numpy as np
 
 from .common import MAX_SUBDIVIDE, int_range
 
+EXAMPLES = (
+    "vjm-pin analyze paper-a-s --deflection -0.001 0 0",
+    "vjm-pin analyze ur5 --q shoulder_lift_joint=-1 elbow_joint=1 --wrench 0 0 -100 --json",
+    "vjm-pin analyze orthoglide-q0 --wrench -100 -100 -100 --json",
+)
+
+#: Keys of every ``analyze --json`` object, whatever the model kind and solver path (null
+#: where a key does not apply): see ``vjm-pin schema analyze``.
+KEYS = (
+    "model", "parallel", "frame", "task", "control", "converged", "iterations", "path",
+    "wrench", "deflection", "payload", "gravity", "stable", "stable_end_held",
+    "stability_eigenvalues", "stability_end_held_eigenvalues", "warnings", "checks",
+    "residual", "energy", "q", "theta", "stiffness", "stiffness_note", "stiffness_unloaded",
+    "stiffness_unloaded_note", "weakest", "pose", "pose_name", "legs", "unstable_legs",
+)
+
+#: The quantities with units in ``analyze --json`` (:data:`vjm_pin.cli.common.UNITS`).
+UNIT_KEYS = (
+    "deflection", "wrench", "stiffness", "stiffness_along", "compliance_eigenvalues", "q",
+    "theta", "energy", "payload", "direction", "stability_eigenvalues",
+)
+
+
+def analyze_json(body: dict) -> dict:
+    """The ``analyze --json`` object: :func:`vjm_pin.cli.common.envelope` over ``body`` with
+    every key of :data:`KEYS` (missing ones null), in that order."""
+    from .common import envelope
+
+    extra = set(body) - set(KEYS)
+    if extra:
+        raise AssertionError(f"analyze: keys outside the vocabulary: {sorted(extra)}")
+    return envelope("analyze", {k: body.get(k) for k in KEYS}, UNIT_KEYS)
+
 
 def add_robot_options(p) -> None:
     """Options shared by the commands that accept a robot or a plain URDF (analyze, map)."""
@@ -103,7 +136,11 @@ def weakest_direction(k6: np.ndarray, task, lost=()) -> dict | None:
     t = list(task)
     if k6 is None or not any(c < 3 for c in t):
         return None
-    return weakest_translation(np.asarray(k6, float)[np.ix_(t, t)], t, lost).to_dict()
+    d = weakest_translation(np.asarray(k6, float)[np.ix_(t, t)], t, lost).to_dict()
+    # the JSON vocabulary: a scalar stiffness along a direction is "stiffness_along"
+    d["stiffness_along"] = d.pop("stiffness")
+    d["stiffness_along_rotations_held"] = d.pop("stiffness_rotations_held")
+    return d
 
 
 def control_dict(vm, held) -> dict:
@@ -124,6 +161,7 @@ def analysis_dict(vm, res, method="eq30") -> dict:
 
     out = {
         "model": vm.name,
+        "parallel": False,
         "frame": vm.frame,
         "task": vm.task_names,
         "converged": res.converged,
@@ -171,6 +209,7 @@ def loaded_dict(vm, eq, method="eq30", gravity=False, loads=None) -> dict:
 
     out = {
         "model": vm.name,
+        "parallel": False,
         "frame": vm.frame,
         "task": vm.task_names,
         "converged": True,
@@ -185,6 +224,7 @@ def loaded_dict(vm, eq, method="eq30", gravity=False, loads=None) -> dict:
         "stability_end_held_eigenvalues": eq.stability.eigenvalues,
         "warnings": [] if free.stable else ["unstable under the prescribed loads (the end is free under them)"],
         "residual": {"statics": eq.residual},
+        "q": dict(zip(vm.q_names, np.asarray(eq.x, float)[vm.q_idx])),
         "theta": dict(zip(vm.theta_names, eq.theta)),
         "gravity": gravity,
     }
@@ -201,8 +241,9 @@ def loaded_dict(vm, eq, method="eq30", gravity=False, loads=None) -> dict:
     return out
 
 
-def load_from_args(args):
-    """(vm, robot) for the model options of ``args`` (see :func:`add_robot_options`)."""
+def load_from_args(args, allow_closures=False):
+    """(vm, robot) for the model options of ``args`` (see :func:`add_robot_options`); models
+    with loop closures only with ``allow_closures`` (:func:`vjm_pin.registry.resolve`)."""
     from ..registry import resolve
     from ..robots import parse_q
 
@@ -212,6 +253,7 @@ def load_from_args(args):
         q=parse_q(args.q),
         pose_name=args.pose_name,
         springs=args.springs,
+        allow_closures=allow_closures,
     )
 
 
@@ -224,7 +266,9 @@ def run(args) -> int:
 
     if is_parallel_model(args.model):  # parallel robots (<vjm:leg> tags): vjm_pin/cli/parallel_cmds.py
         return run_analyze(args)
-    vm, robot = load_from_args(args)
+    vm, robot = load_from_args(args, allow_closures=True)
+    if vm.closures:  # a closed mechanism: vjm_pin.solver.MechanismSolver
+        return _run_mechanism(args, vm)
     if args.subdivide != 1:
         from ..subdivide import subdivide_model
 
@@ -255,17 +299,103 @@ def run(args) -> int:
     from ..indices import lost_directions, name_direction
     from ..model import COMPONENTS
 
-    lost = [name_direction(v, COMPONENTS) for v in lost_directions(vm)]
+    # a robot's default task drops the directions its pose cannot move (robots.default_task)
+    lost = [name_direction(v, COMPONENTS) for v in lost_directions(vm)] if robot is not None else []
     out["weakest"] = weakest_direction(out["stiffness"], vm.task, lost)
-    out["payload_kg"] = args.payload
+    out["payload"] = args.payload
+    out["gravity"] = bool(args.gravity)
     if robot is not None:
         out["pose"] = robot.pose
         out["pose_name"] = robot.pose_name
+    _summary(args, out)
     if args.json:
-        print(dump_json(out))
+        print(dump_json(analyze_json(out)))
         return 0
     print(_human(vm, robot, out, fmt_matrix))
     return 0
+
+
+def _run_mechanism(args, vm) -> int:
+    """``analyze`` of a model with loop closures (:class:`~vjm_pin.solver.MechanismSolver`): every
+    task component held for ``--deflection`` (or no load), loaded for ``--wrench``; ``--payload``
+    and ``--gravity`` are dead loads (a weight at the end frame, the link weights)."""
+    from ..dead_loads import STANDARD_GRAVITY, Load
+    from ..exceptions import InputError, SingularStiffness
+    from ..solver import MechanismSolver
+    from .common import dump_json, finite_vector, fmt_matrix
+
+    if args.subdivide != 1:
+        raise InputError("--subdivide is not available for models with loop closures")
+    extra = args.payload is not None or args.gravity
+    if extra and args.deflection is not None:
+        raise InputError("--payload/--gravity take a --wrench (or none), not a --deflection")
+    loads = [Load.weight(vm.frame, args.payload)] if args.payload is not None else []
+    solver = MechanismSolver(vm, loads, (0.0, 0.0, -STANDARD_GRAVITY) if args.gravity else None)
+    if args.deflection is not None or (args.wrench is None and not extra):
+        d = np.zeros(6) if args.deflection is None else finite_vector(args.deflection, "--deflection")
+        res = solver.solve(deflection=d)
+    else:
+        w = np.zeros(len(vm.task)) if args.wrench is None else finite_vector(args.wrench, "--wrench")
+        res = solver.solve(wrench=w)
+    out = analysis_dict_mechanism(vm, res)
+
+    def unloaded():
+        bare = MechanismSolver(vm)
+        return bare.stiffness(bare.solve(deflection=np.zeros(6)))
+
+    for key, fn in (("stiffness", lambda: solver.stiffness(res)), ("stiffness_unloaded", unloaded)):
+        try:
+            out[key] = fn().stiffness
+        except SingularStiffness as e:
+            out[key] = None
+            out[key + "_note"] = str(e)
+    out["weakest"] = weakest_direction(out["stiffness"], vm.task, [])
+    out["payload"] = args.payload
+    out["gravity"] = bool(args.gravity)
+    _summary(args, out)
+    if args.json:
+        print(dump_json(analyze_json(out)))
+        return 0
+    print(_human(vm, None, out, fmt_matrix))
+    return 0
+
+
+def analysis_dict_mechanism(vm, res) -> dict:
+    """The JSON object of ``analyze`` for a :class:`~vjm_pin.solver.MechanismResult` (stiffness
+    keys filled by the caller); redundant closure rows and the multiplier choice as warnings."""
+    notes = [res.multipliers_note] if res.multipliers_note else []
+    return {
+        "model": vm.name,
+        "parallel": False,
+        "frame": vm.frame,
+        "task": vm.task_names,
+        "converged": res.converged,
+        "iterations": res.iterations,
+        "path": "mechanism:" + res.path,
+        "wrench": res.wrench,
+        "deflection": res.deflection,
+        "control": control_dict(vm, res.held),
+        "stable": res.stable,
+        "stable_end_held": res.stable_end_held,
+        "stability_eigenvalues": None if res.stability is None else res.stability.eigenvalues,
+        "stability_end_held_eigenvalues": None
+        if res.stability_end_held is None
+        else res.stability_end_held.eigenvalues,
+        "warnings": list(res.warnings) + notes,
+        "checks": {},
+        "residual": res.residuals,
+        "energy": res.energy,
+        "q": dict(zip(vm.q_names, res.q)),
+        "theta": dict(zip(vm.theta_names, res.theta)),
+    }
+
+
+def _summary(args, out) -> None:
+    """The ``--verbose`` line of ``analyze``."""
+    from .common import summary
+
+    verdict = "stable" if out.get("stable") is not False else "UNSTABLE"
+    summary(args, f"{out['model']}: {'converged' if out.get('converged') else 'NOT converged'}, {verdict}")
 
 
 def _human(vm, robot, out, fmt_matrix) -> str:
@@ -276,8 +406,8 @@ def _human(vm, robot, out, fmt_matrix) -> str:
         pose = ", ".join(f"{k}={v:.4g}" for k, v in robot.pose.items() if k in vm.joint_names)
         lines.append(f"pose {robot.pose_name or '(given/default)'}: {pose or 'all joints at 0'}")
     loads = []
-    if out.get("payload_kg") is not None:
-        loads.append(f"payload {out['payload_kg']:g} kg")
+    if out.get("payload") is not None:
+        loads.append(f"payload {out['payload']:g} kg")
     if out.get("gravity"):
         loads.append("link weights (gravity)")
     lines.append(
@@ -324,9 +454,9 @@ def _human(vm, robot, out, fmt_matrix) -> str:
     wk = out.get("weakest")
     if wk is not None:
         lines.append(
-            f"weakest translational stiffness (end free to rotate): {wk['stiffness'] / 1e3:.4g} N/mm along "
+            f"weakest translational stiffness (end free to rotate): {wk['stiffness_along'] / 1e3:.4g} N/mm along "
             f"{np.array2string(np.asarray(wk['direction']), precision=3, suppress_small=True)} (world); "
-            f"with the rotations held: {wk['stiffness_rotations_held'] / 1e3:.4g} N/mm"
+            f"with the rotations held: {wk['stiffness_along_rotations_held'] / 1e3:.4g} N/mm"
         )
         if wk["free_directions"]:
             lines.append(

@@ -122,3 +122,148 @@ def dump_json(obj) -> str:
 
 def fmt_matrix(m: np.ndarray, width: int = 11) -> str:
     return "\n".join("  " + " ".join(f"{v:{width}.4g}" for v in row) for row in np.asarray(m))
+
+
+# ----------------------------------------------------------------------------- JSON vocabulary
+#: Units of the quantities of every ``--json`` output (SI). The same key means the same quantity
+#: in every command: ``stiffness`` is the 6×6 loaded Cartesian stiffness K_C, ``stiffness_along``
+#: a scalar stiffness along a direction; ``wrench`` is a 6-vector (force, moment) and
+#: ``deflection`` a 6-vector (translation, rotation vector) except where the object has a
+#: ``direction`` (curves): there ``deflection`` and ``force`` are the scalars along it.
+UNITS = {
+    "deflection": "m (rotation components: rad)",
+    "wrench": "N (moment components: N·m)",
+    "force": "N (N·m along a rotational direction)",
+    "stiffness": "N/m, N/rad, N·m/m, N·m/rad (6×6, rows and columns x y z rx ry rz, world axes)",
+    "stiffness_along": "N/m (N·m/rad along a rotational direction)",
+    "stiffness_before": "N/m (N·m/rad along a rotational direction)",
+    "stiffness_after": "N/m (N·m/rad along a rotational direction)",
+    "force_control_margin": "N/m (N·m/rad along a rotational direction)",
+    "q": "rad (prismatic joints: m)",
+    "theta": "rad (prismatic springs: m)",
+    "energy": "J",
+    "payload": "kg",
+    "direction": "1 (unit vector, world axes)",
+    "compliance_eigenvalues": "m/N",
+    "stability_eigenvalues": "mixed (eigenvalues of an energy Hessian: only their sign matters)",
+}
+
+
+def envelope(command: str, body: dict, units=None) -> dict:
+    """The JSON object of ``command``: ``version`` (package version), ``command``, ``units``
+    (:data:`UNITS` restricted to the names ``units``, all of it for None, or ``units`` itself
+    when it is a dict) first, then ``body``."""
+    from . import version
+
+    if isinstance(units, dict):
+        names = units
+    else:
+        names = UNITS if units is None else {k: UNITS[k] for k in units}
+    return {"version": version(), "command": command, "units": dict(names), **body}
+
+
+# ----------------------------------------------------------------------------- help, verbosity
+import argparse as _argparse
+
+
+class HelpFormatter(_argparse.RawDescriptionHelpFormatter):
+    """Wraps the description like argparse's default, keeps indented lines (the examples of
+    the epilog) as written."""
+
+    def _fill_text(self, text, width, indent):
+        import textwrap
+
+        out = []
+        for para in text.split("\n\n"):
+            lines = para.splitlines()
+            if any(ln.startswith(" ") for ln in lines) or para.rstrip().endswith(":"):
+                out.append("\n".join(indent + ln for ln in lines))
+            else:
+                out.append(
+                    textwrap.fill(" ".join(para.split()), width, initial_indent=indent, subsequent_indent=indent)
+                )
+        return "\n\n".join(out)
+
+
+def examples_epilog(examples) -> str:
+    """The ``examples:`` epilog of a command: one command line per entry."""
+    return "examples:\n" + "\n".join(f"  {ex}" for ex in examples)
+
+
+def add_verbosity_options(parser, suppress: bool = False) -> None:
+    """``--quiet`` and ``--verbose`` (global: before or after the command name).
+    On the subcommands the defaults are suppressed so they do not undo the global value."""
+    default = _argparse.SUPPRESS if suppress else False
+    g = parser.add_mutually_exclusive_group()
+    g.add_argument(
+        "--quiet", action="store_true", default=default,
+        help="nothing on stderr but errors: no progress bar, no warning, no summary",
+    )
+    g.add_argument(
+        "--verbose", action="store_true", default=default,
+        help="a one-line summary on stderr at the end (what ran, how long)",
+    )
+
+
+def quiet(args) -> bool:
+    return bool(getattr(args, "quiet", False))
+
+
+def verbose(args) -> bool:
+    return bool(getattr(args, "verbose", False)) and not quiet(args)
+
+
+def show_progress(args) -> bool:
+    """Progress bars: on a terminal only, never with ``--quiet`` (or ``--no-progress``)."""
+    import sys
+
+    if quiet(args) or getattr(args, "no_progress", False):
+        return False
+    try:
+        return sys.stderr.isatty()
+    except (AttributeError, ValueError):
+        return False
+
+
+class Progress:
+    """A tqdm bar on stderr when :func:`show_progress`, else nothing. ``update(done, total)``
+    is the callback of the curve tracers; ``close()`` ends the bar."""
+
+    def __init__(self, args, total: int | None, desc: str, unit: str = "pt"):
+        self.bar = None
+        if show_progress(args):
+            import sys
+
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, leave=False)
+
+    def update(self, done, total=None) -> None:
+        if self.bar is not None:
+            if total is not None:
+                self.bar.total = total
+            self.bar.n = done
+            self.bar.refresh()
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
+
+
+def summary(args, text: str) -> None:
+    """With ``--verbose``: one line ``vjm-pin: COMMAND: TEXT (N.N s)`` on stderr."""
+    import sys
+    import time
+
+    if verbose(args):
+        t0 = getattr(args, "_t0", None)
+        took = f" ({time.perf_counter() - t0:.1f} s)" if t0 is not None else ""
+        print(f"vjm-pin: {args.command}: {text}{took}", file=sys.stderr)

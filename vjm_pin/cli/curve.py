@@ -2,10 +2,47 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 from .common import MAX_SUBDIVIDE, OUTPUT_NOTE, int_range, positive_float
+
+EXAMPLES = (
+    "vjm-pin curve paper-c-s --direction -1 0 0 --max-deflection 0.05 --steps 40 --plot curve.png",
+    "vjm-pin curve paper-a-s --direction -1 0 0 --max-deflection 0.01 --steps 20 --json",
+    "vjm-pin curve orthoglide-q1 --direction -1 -1 -1 --max-deflection 0.001 --steps 2 --json",
+)
+
+#: Keys of ``curve --json`` (serial and parallel models alike; null where a key does not
+#: apply): the object, each point (of ``points`` and of each of ``branches``), each critical
+#: point. ``stiffness`` (the 6×6 K_C) is in the points with ``--matrices`` only.
+CURVE_KEYS = ("model", "parallel", "direction", "free", "points", "critical", "branches", "stopped")
+POINT_KEYS = (
+    "deflection", "force", "wrench", "stable", "stable_end_held", "force_control_margin",
+    "stiffness_along", "unstable_legs", "legs",
+)
+CRITICAL_KEYS = (
+    "force", "deflection", "stiffness_before", "stiffness_after", "index", "force_after", "kind",
+)
+UNIT_KEYS = (
+    "deflection", "force", "wrench", "stiffness", "stiffness_along", "stiffness_before",
+    "stiffness_after", "force_control_margin", "direction",
+)
+
+
+def curve_json(body: dict) -> dict:
+    """The ``curve --json`` object: :func:`vjm_pin.cli.common.envelope` over ``body``, every
+    key of :data:`CURVE_KEYS`, :data:`POINT_KEYS` and :data:`CRITICAL_KEYS` present (null
+    where it does not apply)."""
+    from .common import envelope
+
+    def point(d):
+        return {**{k: d.get(k) for k in POINT_KEYS}, **({"stiffness": d["stiffness"]} if "stiffness" in d else {})}
+
+    body = {k: body.get(k) for k in CURVE_KEYS}
+    body["points"] = [point(d) for d in body["points"]]
+    body["branches"] = [[point(d) for d in br] for br in body["branches"] or []]
+    body["critical"] = [{k: c.get(k) for k in CRITICAL_KEYS} for c in body["critical"]]
+    return envelope("curve", body, UNIT_KEYS)
 
 
 def add_parser(sub):
@@ -66,7 +103,9 @@ def add_parser(sub):
         "--refine-tol", type=positive_float, default=1e-4, help="relative force tolerance of critical points"
     )
     p.add_argument(
-        "--json", action="store_true", help="one JSON object {points, critical, branches} on stdout"
+        "--json",
+        action="store_true",
+        help="one JSON object {points, critical, branches, ...} on stdout (see 'vjm-pin schema curve')",
     )
     p.add_argument(
         "--plot",
@@ -77,7 +116,7 @@ def add_parser(sub):
     p.add_argument(
         "--matrices",
         action="store_true",
-        help="also give the loaded 6x6 stiffness K_C (eq. 30) at every point (JSON: 'stiffness_matrix'); "
+        help="also give the loaded 6x6 stiffness K_C (eq. 30) at every point (JSON: 'stiffness'); "
         "in text, at the points just before and after each critical point",
     )
     p.set_defaults(func=run)
@@ -112,7 +151,7 @@ def point_dict(p) -> dict:
         "stable": p.stable,
         "stable_end_held": p.stable_end_held,
         "force_control_margin": p.force_control_margin,
-        "stiffness": p.stiffness,
+        "stiffness_along": p.stiffness,
     }
 
 
@@ -143,11 +182,12 @@ def curve_dict(vm, curve, matrices: bool = False) -> dict:
     def pd(p):
         d = point_dict(p)
         if matrices:
-            d["stiffness_matrix"] = stiffness_matrix(vm, p)
+            d["stiffness"] = stiffness_matrix(vm, p)
         return d
 
     return {
         "model": vm.name,
+        "parallel": False,
         "direction": curve.direction,
         "points": [pd(p) for p in curve.points],
         "critical": [critical_dict(c) for c in curve.critical],
@@ -155,32 +195,18 @@ def curve_dict(vm, curve, matrices: bool = False) -> dict:
     }
 
 
-def _progress_bar(total_hint: int):
-    if not sys.stderr.isatty():
-        return None, None
-    from tqdm import tqdm
-
-    bar = tqdm(total=total_hint, desc="tracing", unit="pt", file=sys.stderr, leave=False)
-
-    def cb(done, total):
-        bar.total = total
-        bar.n = done
-        bar.refresh()
-
-    return cb, bar
-
-
 def trace_and_plot(trace, args, name: str):
-    """Run ``trace(progress)`` with a progress bar on a terminal and write ``--plot``; shared
-    by single-chain and parallel curves. Returns the curve."""
+    """Run ``trace(progress)`` with a progress bar on a terminal (:class:`~vjm_pin.cli.common.Progress`)
+    and write ``--plot``; shared by single-chain and parallel curves. Returns the curve."""
     import numpy as np
 
-    cb, bar = _progress_bar(args.steps + 1)
-    try:
-        curve = trace(cb)
-    finally:
-        if bar is not None:
-            bar.close()
+    from .common import Progress, summary
+
+    with Progress(args, args.steps + 1, f"curve {name}") as bar:
+        curve = trace(bar.update)
+    fu = "N·m" if np.any(np.asarray(curve.direction, float)[3:]) else "N"
+    crit = ", ".join(f"{c.kind} at {c.force:.6g} {fu}" for c in curve.critical) or "none"
+    summary(args, f"{name}: {len(curve.points)} points, critical points: {crit}")
     if args.plot is not None:
         from ..plots import save_curve_plot
 
@@ -226,7 +252,7 @@ def run(args) -> int:
         vm.name,
     )
     if args.json:
-        print(dump_json(curve_dict(vm, curve, args.matrices)))
+        print(dump_json(curve_json(curve_dict(vm, curve, args.matrices))))
         return 0
     rot = bool(np.any(curve.direction[3:]))
     du, fu = ("rad", "N·m") if rot else ("m", "N")

@@ -9,6 +9,12 @@ DIRECTION = (-1.0, 0.0, 0.0)
 MAX_DEFLECTION = 0.05  # m
 STEPS = 60
 
+EXAMPLES = (
+    "vjm-pin demo",
+    "vjm-pin demo --out results/demo",
+    "vjm-pin demo --quiet --out results/demo",
+)
+
 
 def add_parser(sub):
     p = sub.add_parser(
@@ -35,6 +41,7 @@ def add_parser(sub):
 def run(args) -> int:
     from ..outputs import HTML_EXTENSIONS, PLOT_EXTENSIONS, check_output, check_output_dir
     from ..registry import resolve_model
+    from .common import Progress, summary
     from .view import curve_page, trace
 
     out = check_output_dir(args.out, what="--out")  # before any work
@@ -47,7 +54,8 @@ def run(args) -> int:
     print(
         f"model {vm.name}: end frame '{vm.frame}', deflection along {list(DIRECTION)} up to {MAX_DEFLECTION * 1e3:g} mm"
     )
-    curve = trace(vm, direction, MAX_DEFLECTION, STEPS)
+    with Progress(args, STEPS + 1, f"curve {vm.name}") as bar:
+        curve = trace(vm, direction, MAX_DEFLECTION, STEPS, progress=bar.update)
     n_unstable = sum(1 for p in curve.points if p.stable is False)
     print(f"traced {len(curve.points)} equilibria ({n_unstable} unstable)")
     if curve.critical:
@@ -84,4 +92,5 @@ def run(args) -> int:
     print(
         f"animation: {html.resolve()} ({page.frames} frames, deformation ×{page.scale:g}; open it in a browser)"
     )
+    summary(args, f"{vm.name}: {len(curve.points)} points, {len(curve.critical)} critical, wrote {out}")
     return 0

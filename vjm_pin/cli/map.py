@@ -6,6 +6,25 @@ import numpy as np
 
 from .analyze import add_robot_options
 
+EXAMPLES = (
+    "vjm-pin map ur5 --samples 20 --wrench 0 0 -100 --out map.csv --plot map.png",
+    "vjm-pin map ur5 --grid shoulder_lift_joint=-1:0:3 elbow_joint=0:1.5:3 --backend serial --json",
+    "vjm-pin map ur5 --samples 40 --backend dask --workers 2 --out map.npz",
+)
+
+#: Keys of ``map --json``: see ``vjm-pin schema map``. ``deflection`` and ``rotation`` are the
+#: statistics (min, median, max over the poses solved) of the end translation (m) and rotation
+#: (rad) magnitudes; ``stiffness_along`` those of the translational stiffness along the force
+#: 1/(f̂ᵀC f̂), ``weakest_stiffness_along`` those of the weakest translational stiffness (end
+#: free to rotate, ``weakest.stiffness_along`` of ``analyze``), N/m.
+UNITS = {
+    "wrench": "N (moment components: N·m)",
+    "deflection": "m",
+    "rotation": "rad",
+    "stiffness_along": "N/m",
+    "weakest_stiffness_along": "N/m",
+}
+
 
 def add_parser(sub):
     p = sub.add_parser(
@@ -13,7 +32,7 @@ def add_parser(sub):
         help="workspace map: deflection and stiffness indices over many poses (local cores or Dask)",
         description=(
             "Evaluate MODEL over many poses (random within the joint limits, or a grid) under an end "
-            "wrench: deflection (mm, mrad), the translational stiffness along the force 1/(f̂ᵀC f̂) "
+            "wrench: deflection (m, rad), the translational stiffness along the force 1/(f̂ᵀC f̂) "
             "and the smallest eigenvalue of the translational block of the loaded K_C (N/m). Runs on "
             "all local cores by default, or on Dask (--scheduler ADDRESS, or --backend dask for a "
             "local cluster); the results are the same bit for bit whatever the backend."
@@ -119,8 +138,10 @@ def run(args) -> int:
         if backend != "dask":
             raise InputError("--scheduler needs the dask backend")
         _scheduler_option(check_scheduler, args.scheduler)
+    from .common import envelope, show_progress, summary
+
     bar = None
-    if not args.no_progress and not args.json and sys.stderr.isatty():  # no bars in log files
+    if show_progress(args):  # on a terminal only: no bars in log files
         from tqdm import tqdm
 
         bar = tqdm(total=poses.shape[0], unit="pose", file=sys.stderr, desc=f"map {vm.name}")
@@ -160,8 +181,7 @@ def run(args) -> int:
         )
         return 130
     ok = res.ok
-    d_mm = np.linalg.norm(res.deflection[ok, :3], axis=1) * 1e3
-    summary = {
+    out = {
         "model": vm.name,
         "frame": vm.frame,
         "joints": list(names),
@@ -171,34 +191,36 @@ def run(args) -> int:
         "unstable": int(np.sum(ok & ~res.stable)),
         "wrench": w,
         "gravity": bool(args.gravity),
-        "deflection_mm": _stats(d_mm),
-        "k_along_N_per_m": _stats(res.k_along[ok]),
-        "k_min_N_per_m": _stats(res.k_min[ok]),
+        "deflection": _stats(np.linalg.norm(res.deflection[ok, :3], axis=1)),
+        "rotation": _stats(np.linalg.norm(res.deflection[ok, 3:], axis=1)),
+        "stiffness_along": _stats(res.k_along[ok]),
+        "weakest_stiffness_along": _stats(res.k_min[ok]),
         "out": args.out,
         "plot": args.plot,
     }
+    summary(args, f"{vm.name}: {out['poses']} poses, {out['status'].get('ok', 0)} solved, {out['unstable']} unstable")
     if args.json:
-        print(dump_json(summary))
+        print(dump_json(envelope("map", out, UNITS)))
         return 0
     print(
         f"map of {vm.name} (end frame '{vm.frame}'): {poses.shape[0]} poses over {', '.join(names)}; backend {backend}"
     )
     print(
-        f"  status: {', '.join(f'{k} {v}' for k, v in summary['status'].items())}; unstable {summary['unstable']}"
+        f"  status: {', '.join(f'{k} {v}' for k, v in out['status'].items())}; unstable {out['unstable']}"
     )
     for key, label, scale, unit in (
-        ("deflection_mm", "deflection", 1.0, "mm"),
-        ("k_along_N_per_m", "stiffness along the force", 1e-3, "N/mm"),
-        ("k_min_N_per_m", "weakest translational stiffness (end free to rotate)", 1e-3, "N/mm"),
+        ("deflection", "deflection", 1e3, "mm"),
+        ("stiffness_along", "stiffness along the force", 1e-3, "N/mm"),
+        ("weakest_stiffness_along", "weakest translational stiffness (end free to rotate)", 1e-3, "N/mm"),
     ):
-        s = summary[key]
+        s = out[key]
         if s is not None:
             print(
                 f"  {label}: min {s['min'] * scale:.4g}, median {s['median'] * scale:.4g}, max {s['max'] * scale:.4g} {unit}"
             )
     for what in ("out", "plot"):
-        if summary[what]:
-            print(f"  wrote {summary[what]}")
+        if out[what]:
+            print(f"  wrote {out[what]}")
     return 0
 
 

@@ -2,6 +2,12 @@
 
 from __future__ import annotations
 
+EXAMPLES = (
+    "vjm-pin models",
+    "vjm-pin models --json",
+    "vjm-pin models --robots",
+)
+
 
 def add_parser(sub):
     p = sub.add_parser(
@@ -19,7 +25,7 @@ def add_parser(sub):
 
 def run(args) -> int:
     from ..registry import bundled_models, models_dir
-    from .common import dump_json
+    from .common import dump_json, envelope
 
     if args.robots:
         from ..robots import robot_names, robot_source
@@ -37,7 +43,7 @@ def run(args) -> int:
             except Exception as e:  # noqa: BLE001 - listing must not stop at one broken entry
                 rows[name] = {"error": str(e)}
         if args.json:
-            print(dump_json({"robots": rows}))
+            print(dump_json(envelope("models", {"robots": rows}, {})))
         else:
             print("example-robot-data robots (free-flyer robots are analysed with a fixed base):")
             for name, r in rows.items():
@@ -46,7 +52,7 @@ def run(args) -> int:
         return 0
     models = bundled_models()
     if args.json:
-        print(dump_json({"models": {k: str(v) for k, v in models.items()}}))
+        print(dump_json(envelope("models", {"models": {k: str(v) for k, v in models.items()}}, {})))
     else:
         print(f"bundled models in {models_dir()}:")
         for name in models:

@@ -59,8 +59,9 @@ def run_analyze(args) -> int:
     """``vjm-pin analyze`` on a parallel model: robot equilibrium for a platform deflection
     (each leg solved at the same platform pose, wrenches summed) or a wrench (eq. 11 on the
     aggregated stiffness), stability per leg, ``K_C = Σ K_C⁽ⁱ⁾`` (eq. 30/32/33 per leg)."""
+    from ..model import COMPONENTS
     from ..parallel import RobotSolver, load_parallel
-    from .analyze import weakest_direction
+    from .analyze import _summary, analyze_json, weakest_direction
     from .common import dump_json, finite_vector, fmt_matrix
 
     _reject(
@@ -86,18 +87,24 @@ def run_analyze(args) -> int:
     out = {
         "model": pm.name,
         "parallel": True,
+        "frame": pm.platform,
+        "task": [COMPONENTS[c] for c in pm.task],
         "converged": eq.converged,
+        "path": "parallel(deflection)" if args.deflection is not None else "parallel(wrench, eq. 11)",
         "wrench": eq.wrench,
         "deflection": eq.deflection,
+        "gravity": False,
         "stable": eq.stable,
-        "unstable_legs": eq.unstable_legs,
+        "unstable_legs": list(eq.unstable_legs),
+        "warnings": [],
         "stiffness": k,
         "stiffness_unloaded": k0,
         "legs": legs_list(eq),
     }
     out["weakest"] = weakest_direction(k, list(pm.task))
+    _summary(args, out)
     if args.json:
-        print(dump_json(out))
+        print(dump_json(analyze_json(out)))
         return 0
     lines = [
         f"parallel model {pm.name}: {len(pm.legs)} legs ({', '.join(lg.name for lg in pm.legs)})",
@@ -116,24 +123,31 @@ def run_analyze(args) -> int:
     return 0
 
 
-def curve_dict(pm, curve) -> dict:
+def curve_dict(pm, curve, solver=None) -> dict:
+    """The ``curve --json`` body of a parallel curve (keys of :data:`vjm_pin.cli.curve.POINT_KEYS`;
+    with ``solver`` (a :class:`~vjm_pin.parallel.RobotSolver`) each point also has its 6×6
+    ``stiffness``)."""
+
+    def point(p):
+        d = {
+            "deflection": p.s,
+            "force": p.force,
+            "wrench": p.wrench,
+            "stable": p.stable,
+            "stiffness_along": p.stiffness,
+            "unstable_legs": list(p.unstable_legs),
+            "legs": legs_list(p.equilibrium),
+        }
+        if solver is not None:
+            d["stiffness"] = solver.stiffness(p.equilibrium)
+        return d
+
     return {
         "model": pm.name,
         "parallel": True,
         "direction": curve.direction,
         "free": curve.free,
-        "points": [
-            {
-                "deflection": p.s,
-                "force": p.force,
-                "wrench": p.wrench,
-                "stable": p.stable,
-                "stiffness": p.stiffness,
-                "unstable_legs": list(p.unstable_legs),
-                "legs": legs_list(p.equilibrium),
-            }
-            for p in curve.points
-        ],
+        "points": [point(p) for p in curve.points],
         "critical": [
             {
                 "force": c.force,
@@ -146,7 +160,7 @@ def curve_dict(pm, curve) -> dict:
             for c in curve.critical
         ],
         "branches": [],
-        "stopped": curve.stopped,
+        "stopped": curve.stopped or None,  # null: traced to --max-deflection
     }
 
 
@@ -158,16 +172,17 @@ def run_curve(args) -> int:
     from ..exceptions import InputError
     from ..parallel import RobotSolver, load_parallel, trace_robot_force_curve
     from .common import direction_vector, dump_json
-    from .curve import trace_and_plot
+    from .curve import curve_json, trace_and_plot
 
     _reject(args, {"all_branches": ("--all-branches", False), "subdivide": ("--subdivide", 1)})
     pm = load_parallel(model_path(args.model))
     d = direction_vector(args.direction, "--direction")
     if not np.isfinite(args.max_deflection):
         raise InputError(f"--max-deflection must be finite, got {args.max_deflection}")
+    rs = RobotSolver(pm)
     curve = trace_and_plot(
         lambda cb: trace_robot_force_curve(
-            RobotSolver(pm),
+            rs,
             d,
             args.max_deflection,
             args.steps,
@@ -179,7 +194,7 @@ def run_curve(args) -> int:
         pm.name,
     )
     if args.json:
-        print(dump_json(curve_dict(pm, curve)))
+        print(dump_json(curve_json(curve_dict(pm, curve, rs if args.matrices else None))))
         return 0
     print(
         f"parallel model {pm.name}: direction {np.round(curve.direction, 4).tolist()} "

@@ -18,6 +18,24 @@ log = logging.getLogger(__name__)
 
 DEFAULT_STEPS = 60
 
+EXAMPLES = (
+    "vjm-pin view paper-c-s --curve --direction -1 0 0 --max-deflection 0.05 --html curve.html",
+    "vjm-pin view paper-a-s --wrench 2 0.1 0 --html loaded.html --json",
+    "vjm-pin view ur5 --q shoulder_lift_joint=-1 elbow_joint=1 --wrench 0 0 -200 --open",
+)
+
+#: Keys of ``view --json`` (see ``vjm-pin schema view``). ``frames`` are the animation frames:
+#: with ``--curve`` (``direction`` given) each has the scalars ``deflection`` and ``force``
+#: along the direction, as the points of ``curve``; along a load path each has the 6-vectors
+#: ``deflection`` and ``wrench`` of the equilibrium at ``load_factor`` × the load, as ``analyze``.
+VIEW_KEYS = (
+    "model", "parallel", "mode", "direction", "html", "scale", "frames", "critical",
+    "critical_frame", "branches",
+)
+UNIT_KEYS = (
+    "deflection", "force", "wrench", "stiffness_before", "stiffness_after", "direction",
+)
+
 
 def add_parser(sub):
     p = sub.add_parser(
@@ -93,18 +111,32 @@ def add_parser(sub):
         action="store_true",
         help="open the page (or the served viewer) in the web browser",
     )
+    p.add_argument(
+        "--json",
+        action="store_true",
+        help="with --html: one JSON object on stdout describing the page's frames (see "
+        "'vjm-pin schema view')",
+    )
     p.set_defaults(func=run)
 
 
 # ----------------------------------------------------------------------------- curves
 def trace(
-    vm, direction: np.ndarray, max_deflection: float, steps: int = DEFAULT_STEPS, all_branches: bool = False
+    vm,
+    direction: np.ndarray,
+    max_deflection: float,
+    steps: int = DEFAULT_STEPS,
+    all_branches: bool = False,
+    progress=None,
 ):
     """The force-deflection curve of ``vm`` along ``direction`` up to ``max_deflection`` (m);
-    with ``all_branches`` also the branches that leave its critical points."""
+    with ``all_branches`` also the branches that leave its critical points. ``progress(done,
+    total)`` is called as points are traced (:func:`vjm_pin.solver.curve.trace_curve`)."""
     from ..solver.curve import trace_curve
 
-    return trace_curve(vm, direction, max_deflection, steps, all_branches=all_branches)
+    return trace_curve(
+        vm, direction, max_deflection, steps, all_branches=all_branches, progress=progress
+    )
 
 
 def _label(deflection_m: float, force_n: float, stable) -> str:
@@ -621,6 +653,8 @@ def run(args) -> int:
     from .parallel_cmds import is_parallel_model
 
     check_output_option(args, "--html", HTML_EXTENSIONS)  # before any work
+    if getattr(args, "json", False) and args.html is None:
+        raise InputError("--json describes the page written by --html: give --html FILE.html")
     if is_parallel_model(args.model):
         raise InputError(
             f"'{args.model}' is a parallel model (<vjm:leg> tags); 'vjm-pin view' shows serial "
@@ -653,10 +687,19 @@ def run(args) -> int:
         if args.steps < 2:
             raise InputError(f"--steps must be at least 2, got {args.steps}")
         direction = direction_vector(args.direction, "--direction")
-        curve = trace(vm, direction, args.max_deflection, args.steps, args.all_branches)
+        from .common import Progress, summary
+
+        with Progress(args, args.steps + 1, f"curve {vm.name}") as bar:
+            curve = trace(
+                vm, direction, args.max_deflection, args.steps, args.all_branches, bar.update
+            )
         if args.html is not None:
             cp = curve_page(vm, curve, scale=args.scale, path=args.html)
-            print(f"wrote {args.html}: {cp.frames} frames, deformation ×{cp.scale:g}")
+            summary(args, f"{vm.name}: wrote {args.html}, {cp.frames} frames, {len(curve.critical)} critical points")
+            if args.json:
+                print(_dump_view(_curve_view_dict(vm, curve, cp, args.html)))
+            else:
+                print(f"wrote {args.html}: {cp.frames} frames, deformation ×{cp.scale:g}")
             _maybe_open(args)
             return 0
         geom, shown, scale, kw = curve_animation(vm, curve, scale=args.scale)
@@ -685,13 +728,80 @@ def run(args) -> int:
             path=args.html,
             **kw,
         )
-        print(
-            f"wrote {args.html}: deformation ×{scale:g}; {'stable' if res.stable is not False else 'UNSTABLE'} equilibrium"
-        )
+        from .common import summary
+
+        verdict = "stable" if res.stable is not False else "UNSTABLE"
+        summary(args, f"{vm.name}: wrote {args.html}, {len(shown)} frames, {verdict} equilibrium")
+        if args.json:
+            print(_dump_view(_load_view_dict(vm, kind, ts, path, scale, args.html)))
+        else:
+            print(f"wrote {args.html}: deformation ×{scale:g}; {verdict} equilibrium")
         _maybe_open(args)
         return 0
     kw.pop("frame_labels")
     return _serve(vm, geom, shown, scale, args, kw)
+
+
+def _dump_view(body: dict) -> str:
+    from .common import dump_json, envelope
+
+    return dump_json(envelope("view", {k: body.get(k) for k in VIEW_KEYS}, UNIT_KEYS))
+
+
+def _curve_view_dict(vm, curve, cp, html) -> dict:
+    """The ``view --curve --json`` body: the frames of the page ``cp`` (:class:`CurvePage`)."""
+    from .curve import CRITICAL_KEYS, critical_dict
+
+    return {
+        "model": vm.name,
+        "parallel": False,
+        "mode": "curve",
+        "direction": curve.direction,
+        "html": str(html),
+        "scale": cp.scale,
+        "frames": [
+            {
+                "deflection": f.deflection,
+                "force": f.force,
+                "wrench": f.wrench,
+                "stable": f.stable,
+                "kind": f.kind,
+            }
+            for f in cp.curve_frames
+        ],
+        "critical": [{k: critical_dict(c).get(k) for k in CRITICAL_KEYS} for c in curve.critical],
+        "critical_frame": cp.critical_frame,
+        "branches": cp.branches,
+    }
+
+
+def _load_view_dict(vm, kind, ts, results, scale, html) -> dict:
+    """The ``view --deflection/--wrench --json`` body: one frame per equilibrium of the load
+    path (the unloaded robot at load factor 0, as drawn)."""
+    frames = []
+    for t, r in zip(ts, results):
+        zero = t == 0
+        frames.append(
+            {
+                "load_factor": float(t),
+                "deflection": np.zeros(6) if zero else r.deflection,
+                "wrench": np.zeros(6) if zero else r.wrench,
+                "stable": True if zero else r.stable is not False,
+                "kind": "load",
+            }
+        )
+    return {
+        "model": vm.name,
+        "parallel": False,
+        "mode": kind,
+        "direction": None,
+        "html": str(html),
+        "scale": scale,
+        "frames": frames,
+        "critical": [],
+        "critical_frame": None,
+        "branches": 0,
+    }
 
 
 def _maybe_open(args) -> None:

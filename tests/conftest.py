@@ -1,0 +1,37 @@
+"""Suite-wide checks.
+
+Every ``--json`` object a command prints in these tests (through
+:func:`vjm_pin.cli.common.dump_json`) is validated against the JSON Schema its command ships
+(``vjm_pin/schemas/COMMAND.json``, ``vjm-pin schema COMMAND``): a vocabulary drift fails the
+test that produced the output. :data:`JSON_VALIDATED` counts the validated objects by command.
+"""
+
+from __future__ import annotations
+
+import collections
+
+import pytest
+
+JSON_VALIDATED: collections.Counter = collections.Counter()
+
+
+@pytest.fixture(autouse=True)
+def _validate_json_outputs(monkeypatch):
+    import jsonschema
+
+    from vjm_pin.cli import common
+    from vjm_pin.cli.schema import SCHEMAS, load_schema
+
+    original = common.dump_json
+
+    def checked(obj) -> str:
+        text = original(obj)
+        data = common.to_jsonable(obj)
+        command = data.get("command") if isinstance(data, dict) else None
+        if command in SCHEMAS:
+            jsonschema.validate(data, load_schema(command), cls=jsonschema.Draft202012Validator)
+            JSON_VALIDATED[command] += 1
+        return text
+
+    monkeypatch.setattr(common, "dump_json", checked)
+    yield
