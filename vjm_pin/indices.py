@@ -158,7 +158,9 @@ def weakest_translation(K_C_task: np.ndarray, task, lost=()) -> WeakestDirection
     k = np.asarray(K_C_task, dtype=float)
     m = len(task)
     if k.shape != (m, m):
-        raise InputError(f"K_C on the task must be ({m}, {m}) for task {[COMPONENTS[c] for c in task]}, got {k.shape}")
+        raise InputError(
+            f"K_C on the task must be ({m}, {m}) for task {[COMPONENTS[c] for c in task]}, got {k.shape}"
+        )
     if not np.all(np.isfinite(k)):
         raise InputError("K_C contains NaN or infinite values")
     tt = [i for i, c in enumerate(task) if c < 3]
@@ -244,7 +246,7 @@ def weakest_translation(K_C_task: np.ndarray, task, lost=()) -> WeakestDirection
 
 
 def lost_directions(
-    vm: VjmModel, x: np.ndarray | None = None, *, outside_task: bool = True, seed: int = 0
+    vm: VjmModel, x: np.ndarray | None = None, *, outside_task: bool = True, seed: int = 0, kin=None
 ) -> tuple[np.ndarray, ...]:
     """Directions in which the end cannot move to first order at ``x`` although it can at
     nearby configurations: the directions a singular pose loses.
@@ -266,6 +268,8 @@ def lost_directions(
         vm: The model. x: (nq,) configuration (default the unloaded reference pose).
         outside_task: Return only the lost directions with a component outside ``vm.task``.
         seed: Seed of the perturbation.
+        kin: A :class:`~vjm_pin.kinematics.Kinematics` of ``vm`` to reuse (creating one
+            costs seconds for finely subdivided models).
 
     Returns:
         Unit 6-vectors over ``(x, y, z, rx, ry, rz)`` (m and rad mixed, as in the Jacobian);
@@ -273,17 +277,20 @@ def lost_directions(
     """
     from .kinematics import Kinematics
 
+    if outside_task and len(vm.task) == 6:
+        return ()  # nothing is outside the task
     x = vm.reference if x is None else np.asarray(x, float)
     free = np.concatenate([vm.theta_idx, vm.q_idx]).astype(int)
     if free.size == 0:
         return ()
-    kin = Kinematics(vm.model, vm.frame_id)
+    kin = Kinematics(vm.model, vm.frame_id) if kin is None else kin
     rng = np.random.default_rng(seed)
     xp = np.array(x, float)
     xp[free] += LOST_PROBE * rng.standard_normal(free.size)
 
     def left_null(jac):
-        u, s, _ = np.linalg.svd(jac)
+        # U and the singular values of the (6, n) J from the small R of Jᵀ = QR (J = Rᵀ Qᵀ)
+        u, s, _ = np.linalg.svd(np.linalg.qr(jac.T, mode="r").T, full_matrices=True)
         rank = int(np.sum(s > 1e-9 * max(s.max() if s.size else 0.0, 1e-300)))
         return u[:, rank:]
 

@@ -36,6 +36,11 @@ perturbed restarts (small seeded random noise on ``(q, θ)``, §4.1) when an ite
 stalls; an unstable equilibrium is left along its unstable eigenvectors first
 (:meth:`EquilibriumSolver._escape`). The result says which path was used.
 
+Every iterate's coordinates smaller than :data:`~vjm_pin.kinematics.FLUSH_BELOW` (1e-150) are
+set to exactly zero (:func:`~vjm_pin.kinematics.flush_tiny`): on a straight column they would
+otherwise converge to subnormal floats, which slow Pinocchio, without changing any result. The
+public calls run with one BLAS thread (:mod:`vjm_pin.solver.threads`).
+
 Mixed control (:meth:`EquilibriumSolver.solve_mixed`): each task component is *held*
 (deflection prescribed) or *loaded* (dead force/moment prescribed). The equilibrium is a
 stationary point of the total potential ``½(θ−θ₀)ᵀK_θ(θ−θ₀) − w_Lᵀ t_L`` subject to the held
@@ -74,7 +79,7 @@ from scipy.linalg import lapack as _lapack
 from scipy.linalg import solve_triangular as _solve_triangular
 
 from ..exceptions import EquilibriumCheckError, InputError, NoEquilibrium, SingularStiffness
-from ..kinematics import Kinematics, contract_hessian, deflection, displace, pose_error
+from ..kinematics import Kinematics, contract_hessian, deflection, displace, flush_tiny, pose_error
 from ..model import VjmModel
 from .blocks import Blocks, evaluate_blocks, full_wrench, remember_blocks
 from .stability import (
@@ -89,6 +94,7 @@ from .stability import (
     spectral_norm,
 )
 from .stiffness import stiffness_from_blocks
+from .threads import one_blas_thread
 
 METHODS = ("newton", "fixed-point")
 #: A converged iterate is polished by up to this many further Newton steps while the step
@@ -107,8 +113,10 @@ UNSTABLE_HELD_NOTE = (
 )
 #: Rotation-target iterations of a partial-rotation task (see ``EquilibriumSolver.solve``) and
 #: their tolerance on the held rotation-vector components (rad).
-ROTATION_TARGET_ITER = 30
+ROTATION_TARGET_ITER = 200
 ROTATION_TARGET_TOL = 1e-12
+#: A held rotation component missed by more than this (rad) after the corrections is a failure.
+ROTATION_TARGET_FAIL = 1e-10
 #: Unstable modes pushed along, and the push amplitudes, when a deflection-driven solve
 #: converged to an unstable equilibrium (:meth:`EquilibriumSolver._escape`).
 ESCAPE_MODES = 2
@@ -298,11 +306,16 @@ class EquilibriumSolver:
         perturbation: float = 1e-3,
         seed: int = 0,
         follow_stable: bool = True,
+        _kin: Kinematics | None = None,
     ):
         _check_options(method=method, tol=tol, max_iter=max_iter, restarts=restarts,
                        perturbation=perturbation, seed=seed, follow_stable=follow_stable)
         self.vm = vm
-        self.kin = Kinematics(vm.model, vm.frame_id)
+        # ``_kin`` (private): a Kinematics of this model and frame to share (one pin.Data per
+        # map worker instead of one per pose); same results, it only holds Pinocchio's workspace
+        if _kin is not None and (_kin.model is not vm.model or _kin.frame_id != vm.frame_id):
+            raise InputError("_kin must be a Kinematics of the same pin.Model and end frame")
+        self.kin = _kin if _kin is not None else Kinematics(vm.model, vm.frame_id)
         self.method = method
         self.tol = tol
         self.max_iter = max_iter
@@ -350,7 +363,7 @@ class EquilibriumSolver:
         for the others) that shares this one's :class:`Kinematics`: creating a ``pin.Data``
         costs seconds for finely subdivided models. Use in the same thread only."""
         params = inspect.signature(EquilibriumSolver.__init__).parameters
-        opts = {k: p.default for k, p in params.items() if k not in ("self", "vm")}
+        opts = {k: p.default for k, p in params.items() if k not in ("self", "vm") and not k.startswith("_")}
         opts.update(options)
         _check_options(**opts)
         new = copy.copy(self)
@@ -431,7 +444,7 @@ class EquilibriumSolver:
         pt = np.asarray(p_t, float)
         rt = np.asarray(r_t, float)
         kkt_prev = np.inf
-        x = np.array(x, dtype=float)
+        x = flush_tiny(np.array(x, dtype=float))
         f6 = np.zeros(6)
         tau = np.zeros(n)
         qfull = np.zeros((n, n), order="F")
@@ -503,6 +516,7 @@ class EquilibriumSolver:
                     polish += 1
                     x = x.copy()
                     x[free] += step
+                    flush_tiny(x)
                     kkt_prev = np.inf
                     continue
             if converged:
@@ -562,6 +576,7 @@ class EquilibriumSolver:
                 return None
             x = x.copy()
             x[free] += dx
+            flush_tiny(x)
             kkt_prev = kkt
         return None
 
@@ -662,6 +677,7 @@ class EquilibriumSolver:
             for _ in range(30):
                 xn = x.copy()
                 xn[self.free] += alpha * dz
+                flush_tiny(xn)
                 xn, sn, feas = self._restore(xn, None, p_t, r_t)
                 if feas:
                     en_ = self.energy(xn)
@@ -710,6 +726,7 @@ class EquilibriumSolver:
                 delta *= self.max_step / big
             x = x.copy()
             x[self.free] += delta
+            flush_tiny(x)
             state = None
         state = self.kin.evaluate(x, hessian=False)
         e = pose_error(p_t, r_t, state.position, state.rotation)[self.task]
@@ -740,6 +757,7 @@ class EquilibriumSolver:
             f = sol[:m]
             x[vm.q_idx] += sol[m:]
             x[vm.theta_idx] = vm.theta0 + self.Kinv @ jt.T @ f
+            flush_tiny(x)
             if not np.all(np.isfinite(x)):
                 return x, f, it, False, self.kin.evaluate(np.nan_to_num(x))
             state = self.kin.evaluate(x, hessian=False)
@@ -875,7 +893,7 @@ class EquilibriumSolver:
         hrot = [c for c in held if c >= 3]
         return hrot if 0 < len(hrot) < 3 else []
 
-    def _rotation_targets(self, d, held, run, x0, f0) -> EquilibriumResult:
+    def _rotation_targets(self, d, held, run, x0, f0, raise_on_failure: bool = True) -> EquilibriumResult:
         """Meet the held rotation components of the deflection ``d`` in the reported
         coordinates ``log3(R R0ᵀ)`` when only some rotations are held.
 
@@ -885,7 +903,11 @@ class EquilibriumSolver:
         corrected: ``d̂[held] += d[held] − φ[held]`` and ``d̂[other] = φ[other]`` with ``φ =
         log3(R R0ᵀ)`` of the last equilibrium, until ``|φ[held] − d[held]| ≤``
         :data:`ROTATION_TARGET_TOL`; at the fixed point ``R_t = R``, so the held components
-        of the reported deflection equal the request and the wrench is the physical one."""
+        of the reported deflection equal the request and the wrench is the physical one.
+        Far from the reference the fixed point converges slowly (the free rotation-vector
+        components move with the held ones; a secant step diverged there). A held component missed by more than :data:`ROTATION_TARGET_FAIL` is a failure
+        (:class:`NoEquilibrium`, or ``converged=False`` without ``raise_on_failure``), never a
+        result with a warning only."""
         hrot = self._partial_rotation(held)
         p, r = displace(self.p0, self.r0, d)
         res = run(p, r, x0, f0)
@@ -913,9 +935,19 @@ class EquilibriumSolver:
         miss = float(np.abs(d[hrot] - res.deflection[hrot]).max())
         if res.converged and miss > ROTATION_TARGET_TOL:
             warn = warn + (f"held rotation components met to {miss:.2g} rad only",)
-        return replace(res, iterations=total, path=res.path + f"+rotation-target({k})", warnings=warn)
+        res = replace(res, iterations=total, path=res.path + f"+rotation-target({k})", warnings=warn)
+        if res.converged and miss > ROTATION_TARGET_FAIL:
+            msg = (
+                f"held rotation components {[COMPONENTS[c] for c in hrot]} missed by {miss:.3g} rad "
+                f"after {k} target corrections (tolerance {ROTATION_TARGET_FAIL:g} rad)"
+            )
+            res = replace(res, converged=False)
+            if raise_on_failure:
+                raise NoEquilibrium(msg, res, miss)
+        return res
 
     # ----------------------------------------------------------------- deflection-driven
+    @one_blas_thread
     def solve(
         self,
         deflection=None,
@@ -964,7 +996,7 @@ class EquilibriumSolver:
             return run(p_t, r_t, x_start, f_start)
         d = self._vector6(deflection, "deflection", "m, rad")
         _as_target(self.vm, self.kin, self.p0, self.r0, d, None)  # components outside the task
-        return self._rotation_targets(d, self.task, run, x_start, f_start)
+        return self._rotation_targets(d, self.task, run, x_start, f_start, raise_on_failure)
 
     def _escape(self, res, p_t, r_t, attempt_once) -> list[EquilibriumResult]:
         """Stable equilibria reached from the unstable equilibrium ``res`` by pushing its
@@ -1062,6 +1094,7 @@ class EquilibriumSolver:
         return best
 
     # ----------------------------------------------------------------- mixed control
+    @one_blas_thread
     def solve_mixed(
         self,
         deflection=None,
@@ -1137,8 +1170,9 @@ class EquilibriumSolver:
         def run(p, r, x, f):
             return self._mixed_solve_target(p, r, x, hrows, w, raise_on_failure, fast_fail)
 
-        return self._rotation_targets(d, hcomp, run, x_start, None)
+        return self._rotation_targets(d, hcomp, run, x_start, None, raise_on_failure)
 
+    @one_blas_thread
     def solve_wrench(
         self,
         wrench,
@@ -1313,6 +1347,7 @@ class EquilibriumSolver:
                 v = z @ vec[:, 0]
                 x = x.copy()
                 x[free] += v * (self.max_step / max(np.abs(v / self.var_scale).max(), 1e-300))
+                flush_tiny(x)
                 continue
             if conv:
                 if modified or polish >= POLISH_ITERATIONS or np.abs(dx / self.var_scale).max() <= POLISH_STEP:
@@ -1320,6 +1355,7 @@ class EquilibriumSolver:
                 polish += 1
                 x = x.copy()
                 x[free] += dx
+                flush_tiny(x)
                 continue
             if it - polish >= max_iter:
                 break
@@ -1331,6 +1367,7 @@ class EquilibriumSolver:
                 kkt_prev = kkt0
                 x = x.copy()
                 x[free] += dx
+                flush_tiny(x)
                 continue
             if smax > self.max_step:
                 dx = dx * (self.max_step / smax)
@@ -1343,6 +1380,7 @@ class EquilibriumSolver:
             for _ in range(40):
                 xn = x.copy()
                 xn[free] += alpha * dx
+                flush_tiny(xn)
                 stn, _, _, _, _, _, _, lamn, rn, en = self._mixed_state(xn, hrows, lrows, w_dead, p_t, r_t, False)
                 if np.all(np.isfinite(rn)) and np.all(np.isfinite(lamn)):
                     if not self.follow_stable:
@@ -1411,6 +1449,7 @@ class EquilibriumSolver:
         )
 
     # ----------------------------------------------------------------- checks
+    @one_blas_thread
     def verify(self, res: EquilibriumResult, *, method: str = "eq30", rtol: float = VERIFY_RTOL) -> EquilibriumResult:
         """Check an equilibrium of this solver; retry once (tighter tolerance, warm start) on
         failure; return it with ``checks`` filled, or raise :class:`EquilibriumCheckError`.
