@@ -884,39 +884,6 @@ def _unloaded(vm, solver, d, kin) -> EquilibriumResult | None:
     return probe
 
 
-def _unloaded(vm, solver, d, kin) -> EquilibriumResult | None:
-    """The unloaded reference as the first point when the chain is rigid along ``d``
-    there (straight chain of rigid links, Model A S): the force at zero deflection is then
-    indeterminate and the solver's perturbed start would pick an arbitrary one; the
-    unloaded state (zero wrench) is the natural start of the curve."""
-    from . import blocks_at
-    from .stability import check_stability
-
-    x = np.asarray(vm.reference, float).copy()
-    stat = vm.K_theta @ (x[vm.theta_idx] - vm.theta0)
-    if stat.size and np.abs(stat).max() > 0:
-        return None
-    b = blocks_at(vm, x, np.zeros(6), kin)
-    probe = EquilibriumResult(
-        x=x,
-        q=x[vm.q_idx].copy(),
-        theta=x[vm.theta_idx].copy(),
-        wrench=np.zeros(6),
-        deflection=np.zeros(6),
-        position=solver.p0.copy(),
-        rotation=solver.r0.copy(),
-        converged=True,
-        iterations=0,
-        residuals={"position": 0.0, "orientation": 0.0, "statics": 0.0},
-        energy=0.0,
-        path="reference",
-        stability=check_stability(b),
-    )
-    if not np.isinf(tangent_stiffness(vm, probe, d, kin)):
-        return None
-    return probe
-
-
 @one_blas_thread
 def trace_curve(
     vm: VjmModel,
