@@ -261,7 +261,7 @@ def run(args) -> int:
     from ..exceptions import InputError
     from ..loads import LinkLoads, payload_wrench, solve_loaded
     from ..solver import EquilibriumSolver
-    from .common import dump_json, finite_vector, fmt_matrix
+    from .common import finite_vector
     from .parallel_cmds import is_parallel_model, run_analyze
 
     if is_parallel_model(args.model):  # parallel robots (<vjm:leg> tags): vjm_pin/cli/parallel_cmds.py
@@ -302,17 +302,10 @@ def run(args) -> int:
     # a robot's default task drops the directions its pose cannot move (robots.default_task)
     lost = [name_direction(v, COMPONENTS) for v in lost_directions(vm)] if robot is not None else []
     out["weakest"] = weakest_direction(out["stiffness"], vm.task, lost)
-    out["payload"] = args.payload
-    out["gravity"] = bool(args.gravity)
     if robot is not None:
         out["pose"] = robot.pose
         out["pose_name"] = robot.pose_name
-    _summary(args, out)
-    if args.json:
-        print(dump_json(analyze_json(out)))
-        return 0
-    print(_human(vm, robot, out, fmt_matrix))
-    return 0
+    return _emit(args, vm, robot, out)
 
 
 def _run_mechanism(args, vm) -> int:
@@ -322,7 +315,7 @@ def _run_mechanism(args, vm) -> int:
     from ..dead_loads import STANDARD_GRAVITY, Load
     from ..exceptions import InputError, SingularStiffness
     from ..solver import MechanismSolver
-    from .common import dump_json, finite_vector, fmt_matrix
+    from .common import finite_vector
 
     if args.subdivide != 1:
         raise InputError("--subdivide is not available for models with loop closures")
@@ -350,13 +343,20 @@ def _run_mechanism(args, vm) -> int:
             out[key] = None
             out[key + "_note"] = str(e)
     out["weakest"] = weakest_direction(out["stiffness"], vm.task, [])
+    return _emit(args, vm, None, out)
+
+
+def _emit(args, vm, robot, out) -> int:
+    """Finish the ``analyze`` object (load options) and print it: ``--json`` or text."""
+    from .common import dump_json, fmt_matrix
+
     out["payload"] = args.payload
     out["gravity"] = bool(args.gravity)
     _summary(args, out)
     if args.json:
         print(dump_json(analyze_json(out)))
         return 0
-    print(_human(vm, None, out, fmt_matrix))
+    print(_human(vm, robot, out, fmt_matrix))
     return 0
 
 

@@ -777,6 +777,15 @@ class EquilibriumSolver:
             stab = None
         elif stab is None:
             stab = check_stability(evaluate_blocks(vm, self.kin, x, w6, state))
+        return self._pack(
+            x, w6, state, ok, iters, res, path, stab, stab, tuple(self.task),
+            () if stab is None or stab.stable else (UNSTABLE_HELD_NOTE,),
+        )
+
+    def _pack(self, x, w6, state, ok, iters, res, path, stab, end, held, warnings) -> EquilibriumResult:
+        """The :class:`EquilibriumResult` at configuration ``x`` (kinematic ``state``) under the
+        total end wrench ``w6``, shared by the all-held and the mixed-control solves."""
+        vm = self.vm
         return EquilibriumResult(
             x=x.copy(),
             q=x[vm.q_idx].copy(),
@@ -791,9 +800,9 @@ class EquilibriumSolver:
             energy=self.energy(x),
             path=path,
             stability=stab,
-            held=tuple(self.task),
-            stability_end_held=stab,
-            warnings=() if stab is None or stab.stable else (UNSTABLE_HELD_NOTE,),
+            held=held,
+            stability_end_held=end,
+            warnings=warnings,
         )
 
     def _solve_local(self, deflection, x0: np.ndarray) -> EquilibriumResult | None:
@@ -1429,24 +1438,7 @@ class EquilibriumSolver:
                     "away from this equilibrium under the dead load"
                     + ("; stable with the end held (eq. 23)" if end.stable else ""),
                 )
-        return EquilibriumResult(
-            x=x.copy(),
-            q=x[vm.q_idx].copy(),
-            theta=x[vm.theta_idx].copy(),
-            wrench=w6,
-            deflection=deflection(self.p0, self.r0, st.position, st.rotation),
-            position=st.position.copy(),
-            rotation=st.rotation.copy(),
-            converged=bool(ok),
-            iterations=int(iters),
-            residuals=res,
-            energy=self.energy(x),
-            path=path,
-            stability=stab,
-            held=tuple(int(c) for c in hcomp),
-            stability_end_held=end,
-            warnings=warnings,
-        )
+        return self._pack(x, w6, st, ok, iters, res, path, stab, end, tuple(int(c) for c in hcomp), warnings)
 
     # ----------------------------------------------------------------- checks
     @one_blas_thread
