@@ -2,7 +2,7 @@
 
 The VJM URDFs are generated into ``models/urdf/`` (``scripts/make_*.py``), the place the
 repository shows them. A non-editable install has no source tree, so ``build_py`` copies them
-into the package as ``vjm_pin/data/*.urdf``, where :func:`vjm_pin.registry.models_dir` finds
+into the package as ``vjm_pin/data/*.urdf``, where :func:`vjm_pin.model.registry.models_dir` finds
 them. Everything else is configured in ``pyproject.toml``.
 """
 

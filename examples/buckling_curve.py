@@ -6,7 +6,7 @@ the end, straight (S posture). Its end is pushed towards the base (direction −
 stays straight up to the critical force Kθ/L = 1 N, then buckles into a trapezoid whose
 stable branch is eq. (35): F_s(Δ) = Kθ/L · φ / sin φ with φ = arccos(1 − Δ/(2L)).
 
-The curve is traced by :func:`vjm_pin.solver.trace_curve` (deflection-driven equilibria of
+The curve is traced by :func:`vjm_pin.analysis.curve.trace_curve` (deflection-driven equilibria of
 eq. 5, stability of eq. 23 at every point, critical points located by root finding).
 
     python examples/buckling_curve.py [--out DIR] [--model paper-a-s] [--steps 40]
@@ -27,8 +27,8 @@ matplotlib.use("Agg")  # no display needed
 import matplotlib.pyplot as plt
 import numpy as np
 
-from vjm_pin.registry import resolve_model
-from vjm_pin.solver import trace_curve
+from vjm_pin.model.registry import resolve_model
+from vjm_pin.analysis.curve import trace_curve
 
 K_THETA = 1.0  # N·m/rad, actuator stiffness of the paper models
 L = 1.0  # m, link length

@@ -7,7 +7,7 @@ turns it into a VJM model:
   datasheet (see docs/stiffness_values.md);
 * the two arm links become 6-D *link springs*: the tip stiffness of a cantilever tube of the
   link's length (from the URDF joint origins), aluminium E = 70 GPa, ν = 0.33
-  (:mod:`vjm_pin.beam`: axial EA/L, bending 12EI/L³ … inverted from the tip compliance).
+  (:mod:`vjm_pin.model.beam`: axial EA/L, bending 12EI/L³ … inverted from the tip compliance).
 
 Then a 200 N downward force is hung on the tool frame: the loaded equilibrium (eq. 5, force
 prescribed), the deflection, and the loaded stiffness K_C (eq. 30) with and without the link
@@ -28,8 +28,8 @@ from pathlib import Path
 import numpy as np
 
 import vjm_pin as vp
-from vjm_pin.beam import Beam
-from vjm_pin.registry import resolve_model
+from vjm_pin.model.beam import Beam
+from vjm_pin.model.registry import resolve_model
 
 # A plain URDF: links and revolute joints, no VJM tags. Lengths: column 0.4 m, upper arm
 # 0.5 m, forearm 0.4 m (the joint origins give the beam lengths).
@@ -69,7 +69,7 @@ SPRINGS = {
     # Actuator (joint) stiffness, N·m/rad: the order of a size-25/32 harmonic drive at its
     # rated torque (datasheet torsional stiffness K3, see docs/stiffness_values.md).
     "actuators": {"waist": 2.0e5, "shoulder": 2.0e5, "elbow": 8.0e4},
-    # Link flexibility: 6-D cantilever springs at each link tip (vjm_pin.beam).
+    # Link flexibility: 6-D cantilever springs at each link tip (vjm_pin.model.beam).
     "links": {"upper_arm": {"beam": TUBE}, "forearm": {"beam": TUBE}},
 }
 

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from vjm_pin.parallel import RobotSolver, load_parallel
-from vjm_pin.registry import bundled_models
+from vjm_pin.model.registry import bundled_models
 
 FORCES = (200.0, 500.0, 1000.0)  # N, magnitude of the push along the bisector
 DIRECTION = -np.ones(3) / np.sqrt(3.0)  # world axes, towards the actuators

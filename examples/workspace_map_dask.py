@@ -1,6 +1,6 @@
 """A workspace map of the UR5 on Dask: deflection and stiffness under a tool load at many poses.
 
-:func:`vjm_pin.maps.run_map` evaluates every pose with one pure function (loaded equilibrium
+:func:`vjm_pin.analysis.maps.run_map` evaluates every pose with one pure function (loaded equilibrium
 of eq. 5 under the wrench, loaded stiffness of eq. 30, stability of eq. 23), so the poses can
 be spread over any ``dask.distributed`` cluster. Here a ``LocalCluster`` of two workers
 stands in for a real cluster: to use yours, pass its address
@@ -27,8 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from vjm_pin.maps import mapped_joints, run_map, sample_poses
-from vjm_pin.registry import resolve_model
+from vjm_pin.analysis.maps import mapped_joints, run_map, sample_poses
+from vjm_pin.model.registry import resolve_model
 
 WRENCH = np.array([0.0, 0.0, -100.0, 0.0, 0.0, 0.0])  # N, N·m: 100 N downwards on the tool
 

@@ -11,7 +11,7 @@ Measured for the bundled ``paper-c-s`` model (Model C, S posture: a straight col
 - loaded stiffness by eq. (30), (32), (33) and the stability check of eq. (23);
 - a 200-point force–deflection curve in compression with stiffness and stability at each point;
 - the same curve with ``J`` and ``H`` by central differences of Pinocchio placements (the
-  baseline: :class:`FDKinematics`, a drop-in :class:`~vjm_pin.kinematics.Kinematics`);
+  baseline: :class:`FDKinematics`, a drop-in :class:`~vjm_pin.kinematics.chain.Kinematics`);
 - scaling with link subdivision k = 1, 2, 4, 8, 16 (time per curve point versus nθ, fitted
   exponent);
 - the OpenSeesPy peer (``scripts/opensees_peer.py``): critical force and wall time of the same
@@ -50,9 +50,9 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from vjm_pin.kinematics import Kinematics, KinematicState
-from vjm_pin.model import VjmModel, load_vjm
-from vjm_pin.paper_models import PAPER_BEAM, paper_model_urdf
+from vjm_pin.kinematics.chain import Kinematics, KinematicState
+from vjm_pin.model.format import VjmModel, load_vjm
+from vjm_pin.model.paper_models import PAPER_BEAM, paper_model_urdf
 from vjm_pin.solver import (
     EquilibriumSolver,
     blocks_at,
@@ -130,7 +130,7 @@ def _keep(box: list, value) -> None:
 def paper_model(k: int = 1) -> VjmModel:
     """Model C, S posture, with the bundled beam (``PAPER_BEAM``), links subdivided ``k`` times."""
     if k == 1:
-        from vjm_pin.registry import resolve_model
+        from vjm_pin.model.registry import resolve_model
 
         return resolve_model("paper-c-s")
     return load_vjm(paper_model_urdf("c", "s", beam=PAPER_BEAM, subdivide=k))
@@ -142,7 +142,7 @@ class FDKinematics(Kinematics):
     Pinocchio placements only (no Pinocchio derivatives).
 
     ``J[:3, i] = (p(x + h eᵢ) − p(x − h eᵢ)) / 2h``, ``J[3:, i] = log3(R(x + h eᵢ) R(x − h eᵢ)ᵀ) / 2h``
-    (world-aligned, as :class:`~vjm_pin.kinematics.Kinematics`), and
+    (world-aligned, as :class:`~vjm_pin.kinematics.chain.Kinematics`), and
     ``H[:, :, j] = (J(x + h_H eⱼ) − J(x − h_H eⱼ)) / 2h_H`` (inner step ``h_inner``; the steps
     minimise the error against Pinocchio's analytic derivatives on ``paper-c-s``, ~1e-7 abs.) — 2n + 4n² placements per
     evaluation with a Hessian. Every joint of a VJM model is 1-DOF (nq = nv), so ``x ± h eᵢ``
@@ -218,10 +218,10 @@ class CurveRun:
 
 
 def _trace_curve_fn():
-    if importlib.util.find_spec("vjm_pin.solver.curve") is None:
+    if importlib.util.find_spec("vjm_pin.analysis.curve") is None:
         return None
     try:
-        from vjm_pin.solver.curve import trace_curve
+        from vjm_pin.analysis.curve import trace_curve
     except ImportError:
         return None
     return trace_curve
@@ -229,7 +229,7 @@ def _trace_curve_fn():
 
 def trace(vm: VjmModel, solver: EquilibriumSolver, max_deflection: float, steps: int, use_library: bool = True) -> CurveRun:
     """A force–deflection curve in compression with stiffness (eq. 30) and stability at every
-    point. Uses ``vjm_pin.solver.curve.trace_curve`` when it exists (``use_library``), else a
+    point. Uses ``vjm_pin.analysis.curve.trace_curve`` when it exists (``use_library``), else a
     warm-started loop of ``solve`` + ``loaded_stiffness``."""
     fn = _trace_curve_fn() if use_library else None
     if fn is not None:
@@ -241,7 +241,7 @@ def trace(vm: VjmModel, solver: EquilibriumSolver, max_deflection: float, steps:
             iterations=np.array([p.equilibrium.iterations for p in pts]),
             stable=np.array([bool(p.stable) for p in pts]),
             stiffness=np.array([p.stiffness for p in pts]),
-            engine="vjm_pin.solver.curve.trace_curve",
+            engine="vjm_pin.analysis.curve.trace_curve",
             x=np.array([p.equilibrium.x for p in pts]),
             critical=float(c.critical[0].force) if c.critical else float("nan"),
         )
@@ -529,15 +529,15 @@ UR5_LINKS = ("shoulder_link", "upper_arm_link", "forearm_link", "wrist_1_link", 
 
 def ur5_model() -> VjmModel:
     """``ur5`` (example-robot-data) with default actuator springs and 6-D tube link springs."""
-    from vjm_pin.robots import build_robot
+    from vjm_pin.model.robots import build_robot
 
     return build_robot("ur5", springs={"links": {ln: {"beam": dict(UR5_BEAM)} for ln in UR5_LINKS}}).vm
 
 
 def bench_ur5(repeats: int = 3, steps: int = 200, max_deflection: float = 1e-3) -> dict:
     """Floor, Newton iteration, stiffness, stability and a curve (end pushed along −z) for ``ur5``."""
-    if importlib.util.find_spec("vjm_pin.robots") is None:
-        return {"skipped": "vjm_pin.robots does not exist yet (ur5 with 6-D link springs)"}
+    if importlib.util.find_spec("vjm_pin.model.robots") is None:
+        return {"skipped": "vjm_pin.model.robots does not exist yet (ur5 with 6-D link springs)"}
     try:
         vm = ur5_model()
     except Exception as e:  # noqa: BLE001 - example-robot-data missing, etc.
@@ -568,11 +568,11 @@ def bench_ur5(repeats: int = 3, steps: int = 200, max_deflection: float = 1e-3) 
 
 
 def bench_map(n: int = 200, wrench=(0.0, 0.0, -100.0, 0.0, 0.0, 0.0)) -> dict:
-    """Map throughput (poses per second) of ``vjm_pin.maps.run_map`` on ``ur5`` with link
+    """Map throughput (poses per second) of ``vjm_pin.analysis.maps.run_map`` on ``ur5`` with link
     springs: ``n`` sampled poses under an end force, serial and on all local cores."""
-    if importlib.util.find_spec("vjm_pin.maps") is None or importlib.util.find_spec("vjm_pin.robots") is None:
-        return {"skipped": "vjm_pin.maps or vjm_pin.robots missing (map throughput not measured)"}
-    from vjm_pin.maps import run_map, sample_poses
+    if importlib.util.find_spec("vjm_pin.analysis.maps") is None or importlib.util.find_spec("vjm_pin.model.robots") is None:
+        return {"skipped": "vjm_pin.analysis.maps or vjm_pin.model.robots missing (map throughput not measured)"}
+    from vjm_pin.analysis.maps import run_map, sample_poses
 
     try:
         vm = ur5_model()
@@ -595,10 +595,10 @@ def bench_map(n: int = 200, wrench=(0.0, 0.0, -100.0, 0.0, 0.0, 0.0)) -> dict:
 @contextlib.contextmanager
 def old_behaviour(flush: bool = False, one_thread: bool = False):
     """The behaviour before the quick wins of issue 14, through the library's private switches:
-    no subnormal flush (``vjm_pin.kinematics._flush_enabled``) and BLAS pools as the
+    no subnormal flush (``vjm_pin.kinematics.chain._flush_enabled``) and BLAS pools as the
     environment sets them (``vjm_pin.solver.threads._enabled``). ``flush`` / ``one_thread``
     keep one of the two on (ablation)."""
-    import vjm_pin.kinematics as kmod
+    import vjm_pin.kinematics.chain as kmod
     from vjm_pin.solver import threads
 
     old = (kmod._flush_enabled, threads._enabled)
@@ -644,8 +644,8 @@ def bench_subnormal_eval(k: int = 1, repeats: int = 7, number: int = 50) -> dict
     """Pinocchio J + kinematic Hessian (``Kinematics.evaluate``) at a converged straight-column
     configuration of an unflushed curve (coordinates down to subnormal floats) and at the same
     configuration flushed (|x| < 1e-150 → 0)."""
-    from vjm_pin.kinematics import FLUSH_BELOW
-    from vjm_pin.solver.curve import trace_curve
+    from vjm_pin.kinematics.chain import FLUSH_BELOW
+    from vjm_pin.analysis.curve import trace_curve
 
     vm = paper_model(k)
     with old_behaviour():
@@ -675,7 +675,7 @@ def bench_subnormal_eval(k: int = 1, repeats: int = 7, number: int = 50) -> dict
 def bench_curve_quick_wins(k: int, steps: int, repeats: int, ablation: bool = True) -> dict:
     """The ``k``-subdivided column's compression curve (``trace_curve``, ``steps`` points,
     stiffness, stability and critical points), before / after the quick wins side by side."""
-    from vjm_pin.solver.curve import trace_curve
+    from vjm_pin.analysis.curve import trace_curve
 
     vm = paper_model(k)
     md = default_max_deflection(vm)
@@ -722,14 +722,14 @@ def bench_newton_quick_wins(steps: int, repeats: int) -> dict:
 
 
 def _evaluate_pose_before(vm, names, values, wrench, method="eq30"):
-    """A copy of ``vjm_pin.maps.evaluate_pose`` before issue 14 (no gravity requested): a fresh
+    """A copy of ``vjm_pin.analysis.maps.evaluate_pose`` before issue 14 (no gravity requested): a fresh
     ``Kinematics`` (``pin.Data``) for the reference placement, the solver's own and the
     stiffness's, and, for models without passive joints, ``solve_loaded`` evaluating the link-load
     terms every Newton iteration (a model copy + ``createData`` + RNEA each; reproduced here by a
     gravity of 1e-300 m/s², whose terms are numerically nothing but cost the same)."""
     from vjm_pin.exceptions import NoEquilibrium, SingularStiffness
     from vjm_pin.loads import LinkLoads, solve_loaded
-    from vjm_pin.maps import stiffness_indices
+    from vjm_pin.analysis.maps import stiffness_indices
 
     v = vm.with_positions(dict(zip(names, (float(x) for x in values))))
     Kinematics(v.model, v.frame_id).placement(v.reference)
@@ -751,11 +751,11 @@ def _evaluate_pose_before(vm, names, values, wrench, method="eq30"):
 def bench_map_quick_wins(n: int, repeats: int, wrench=(0.0, 0.0, -100.0, 0.0, 0.0, 0.0)) -> dict:
     """Serial map throughput (poses/s) of ``ur5`` with actuator springs only and with 6-D link
     springs: the pose evaluation before issue 14 (:func:`_evaluate_pose_before`, old switches)
-    and ``vjm_pin.maps.evaluate_pose`` now, side by side, one process."""
-    if importlib.util.find_spec("vjm_pin.robots") is None:
-        return {"skipped": "vjm_pin.robots missing"}
-    from vjm_pin.maps import evaluate_pose, sample_poses
-    from vjm_pin.robots import build_robot
+    and ``vjm_pin.analysis.maps.evaluate_pose`` now, side by side, one process."""
+    if importlib.util.find_spec("vjm_pin.model.robots") is None:
+        return {"skipped": "vjm_pin.model.robots missing"}
+    from vjm_pin.analysis.maps import evaluate_pose, sample_poses
+    from vjm_pin.model.robots import build_robot
 
     out = {}
     for label, make in (("ur5 actuator springs", lambda: build_robot("ur5").vm), ("ur5 + 6-D link springs", ur5_model)):

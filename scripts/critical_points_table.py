@@ -14,8 +14,8 @@ from __future__ import annotations
 import argparse
 import time
 
-from vjm_pin.registry import resolve_model
-from vjm_pin.solver import trace_curve
+from vjm_pin.model.registry import resolve_model
+from vjm_pin.analysis.curve import trace_curve
 
 RANGES = {"a": 1.0, "b": 0.5, "c": 0.5}
 

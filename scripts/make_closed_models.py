@@ -35,7 +35,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 from vjm_pin import generate_vjm
-from vjm_pin.model import NS
+from vjm_pin.model.format import NS
 
 _Q = f"{{{NS}}}"
 

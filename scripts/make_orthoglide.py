@@ -55,7 +55,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vjm_pin.beam import Beam
+from vjm_pin.model.beam import Beam
 
 NS = "urn:vjm-pin:1"
 
@@ -114,7 +114,7 @@ def bar_outer_diameter() -> float:
 
 
 def bar_beam(length: float = L_BAR) -> Beam:
-    """One bar (or one segment of it) as a :class:`~vjm_pin.beam.Beam` (aluminium tube)."""
+    """One bar (or one segment of it) as a :class:`~vjm_pin.model.beam.Beam` (aluminium tube)."""
     d = bar_outer_diameter()
     return Beam(length, "tube", {"outer_diameter": d, "wall": BAR_WALL_RATIO * d}, E_AL, G_AL)
 
@@ -146,7 +146,7 @@ EPS_MOBILITY = 1e-6
 
 def bar_spring(length: float = L_BAR) -> np.ndarray:
     """4×4 stiffness of one bar (x, z, φx, φy) of ``length`` (m) at its platform-end, bar frame
-    (N/m, N, N·m/rad): the cantilever tip stiffness of :class:`~vjm_pin.beam.Beam` without the
+    (N/m, N, N·m/rad): the cantilever tip stiffness of :class:`~vjm_pin.model.beam.Beam` without the
     in-plane (y, φz) rows, which the parallelogram's pins (axes along z) release."""
     keep = [0, 2, 3, 4]
     return np.linalg.inv(bar_beam(length).compliance()[np.ix_(keep, keep)])

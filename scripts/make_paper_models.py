@@ -1,7 +1,7 @@
 """Write the bundled paper models ``models/urdf/paper-{a,b,c}-{s,pi,z}.urdf``.
 
-One source of truth: the rigid chain of eq. (34) (:func:`vjm_pin.paper_models.rigid_chain_urdf`)
-and the spring specs (:func:`vjm_pin.paper_models.paper_spec`). ``tests/test_models.py``
+One source of truth: the rigid chain of eq. (34) (:func:`vjm_pin.model.paper_models.rigid_chain_urdf`)
+and the spring specs (:func:`vjm_pin.model.paper_models.paper_spec`). ``tests/test_models.py``
 regenerates them and fails if a committed file differs. Never edit the URDFs by hand.
 
 Usage: ``python scripts/make_paper_models.py [--out models/urdf]``
@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from vjm_pin.paper_models import PAPER_BEAM, POSTURES, paper_model_urdf
+from vjm_pin.model.paper_models import PAPER_BEAM, POSTURES, paper_model_urdf
 
 
 def paper_models() -> dict[str, str]:

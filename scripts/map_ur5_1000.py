@@ -10,8 +10,8 @@ import time
 
 import numpy as np
 
-from vjm_pin.maps import run_map, sample_poses
-from vjm_pin.robots import build_robot
+from vjm_pin.analysis.maps import run_map, sample_poses
+from vjm_pin.model.robots import build_robot
 
 #: Aluminium tubes for the two long links of the UR5 (6-D beam springs, length from the URDF).
 SPRINGS = {

@@ -7,8 +7,8 @@ One command regenerates the report and its figures under docs/figures/:
 ``--quick`` skips the k = 8, 16 subdivision runs.
 Units: Kθ = 1 N·m/rad and L = 1 m, so forces read in Kθ/L and deflections in L.
 
-Critical points are those of :func:`vjm_pin.solver.trace_curve` (the rule is the module
-docstring of ``vjm_pin/solver/curve.py``): where the followed equilibrium stops being stable
+Critical points are those of :func:`vjm_pin.analysis.curve.trace_curve` (the rule is the module
+docstring of ``vjm_pin/analysis/curve.py``): where the followed equilibrium stops being stable
 under a dead force along the direction, each with its ``kind`` ("bifurcation", "limit",
 "imperfect"), reported in the tables.
 """
@@ -23,11 +23,12 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from vjm_pin.paper_models import PAPER_BEAM
-from vjm_pin.registry import bundled_models, resolve_model
-from vjm_pin.solver import blocks_at, check_stability, trace_curve
-from vjm_pin.solver.curve import IMPERFECT_RATIO, OFFSET_ABS, OFFSET_REL
-from vjm_pin.subdivide import subdivide_model
+from vjm_pin.model.paper_models import PAPER_BEAM
+from vjm_pin.model.registry import bundled_models, resolve_model
+from vjm_pin.solver import blocks_at, check_stability
+from vjm_pin.analysis.curve import trace_curve
+from vjm_pin.analysis.curve import IMPERFECT_RATIO, OFFSET_ABS, OFFSET_REL
+from vjm_pin.model.subdivide import subdivide_model
 
 ROOT = Path(__file__).resolve().parent.parent
 X = [-1.0, 0.0, 0.0]  # compressing force along x: the end moves towards the base
@@ -92,10 +93,10 @@ def pi_sensitivity() -> dict:
     10× stiffer torsion (what-if checks for the difference from the paper's 0.20)."""
     from dataclasses import replace
 
-    from vjm_pin.beam import Beam, cantilever_compliance
-    from vjm_pin.generator import generate_vjm
-    from vjm_pin.model import load_vjm
-    from vjm_pin.paper_models import base_angle, paper_spec, rigid_chain_urdf
+    from vjm_pin.model.beam import Beam, cantilever_compliance
+    from vjm_pin.model.generator import generate_vjm
+    from vjm_pin.model.format import load_vjm
+    from vjm_pin.model.paper_models import base_angle, paper_spec, rigid_chain_urdf
 
     out = {}
     for deg in (45, 60):
@@ -121,7 +122,7 @@ def pi_sensitivity() -> dict:
 def fig4(out: Path) -> dict:
     import matplotlib.pyplot as plt
 
-    from vjm_pin.plots import plot_curve
+    from vjm_pin.viz.plots import plot_curve
 
     vm = resolve_model("paper-a-s")
     c = trace_curve(vm, X, 1.5, steps=30, all_branches=True)
@@ -166,7 +167,7 @@ def fig4(out: Path) -> dict:
 def fig5(out: Path) -> dict:
     import matplotlib.pyplot as plt
 
-    from vjm_pin.plots import plot_curve
+    from vjm_pin.viz.plots import plot_curve
 
     curves = {}
     fig, axes = plt.subplots(3, 3, figsize=(13, 11))
@@ -418,7 +419,7 @@ rigid links) buckles at Kθ/L, so the paper's statement "Model B, S posture, buc
 
     Kθ = (√21 − 3) · E I_z / L  ≈ 1.5826 E I_z / L.
 
-We use this scaling for both B and C (`PAPER_BEAM` in `vjm_pin/paper_models.py`; E is chosen so that
+We use this scaling for both B and C (`PAPER_BEAM` in `vjm_pin/model/paper_models.py`; E is chosen so that
 Kθ = 1 N·m/rad, and E, ν, L, a, b stay explicit in each `<vjm:beam>`, so results can be read in SI).
 It also reproduces Model C, S: out-of-plane bending uses I_y, so P = (√21 − 3) E I_y / L² =
 (I_y/I_z) Kθ/L = (a/b)² Kθ/L = **0.16 Kθ/L**, exactly the paper's value. The alternative reading
@@ -456,7 +457,7 @@ follows the stable trapezoid branch.
 "Linearised" is the smallest force at which the *unloaded* posture, loaded by F along x, fails eq. (23)
 (an independent check that ignores the pre-buckling deformation).
 
-**Critical point rule** (module docstring of `vjm_pin/solver/curve.py`). A critical point is where
+**Critical point rule** (module docstring of `vjm_pin/analysis/curve.py`). A critical point is where
 the followed equilibrium stops being stable under **force control along x**: the end components
 orthogonal to x held, a dead force along x. Its measure is μ(Δ), the largest eigenvalue of the
 Hessian of the total potential on the displacements that keep those components fixed (stable iff
@@ -549,7 +550,7 @@ depended on the steps for Model B Z (below).
 ## 5. Beyond the paper: link subdivision and Euler's load
 
 Each link of Model C (S posture) split into k sub-links, each with the tip spring of a beam of length
-L/k (`vjm_pin.subdivide`, `vjm-pin curve --subdivide K`). Euler's load of the pinned–pinned column of
+L/k (`vjm_pin.model.subdivide`, `vjm-pin curve --subdivide K`). Euler's load of the pinned–pinned column of
 length 3L bending about y: π² E I_y / (3L)² = {euler:.6f} Kθ/L (= 1.09662 E I_y/L²).
 
 | k | critical force [Kθ/L] | vs Euler |

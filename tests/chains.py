@@ -82,7 +82,7 @@ def random_vjm(
 def robot_fd_stiffness(rs, eq, h: float) -> np.ndarray:
     """Central differences (6, 6) of the platform wrench of re-solved robot equilibria
     (``RobotSolver``) around ``eq``, platform displaced by ±h along each component (m, rad)."""
-    from vjm_pin.kinematics import displace
+    from vjm_pin.kinematics.chain import displace
 
     fd = np.zeros((6, 6))
     for j in range(6):

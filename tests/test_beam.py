@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from vjm_pin import SpecError
-from vjm_pin.beam import Beam, rectangle_torsion_constant
+from vjm_pin.model.beam import Beam, rectangle_torsion_constant
 
 
 @pytest.mark.parametrize("ratio,beta", [(1.0, 0.141), (1.5, 0.196), (2.0, 0.229), (2.5, 0.249), (3.0, 0.263), (4.0, 0.281), (10.0, 0.312)])

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vjm_pin.kinematics import Kinematics
+from vjm_pin.kinematics.chain import Kinematics
 
 ROOT = Path(__file__).resolve().parents[1]
 

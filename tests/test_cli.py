@@ -7,7 +7,7 @@ import pytest
 
 from vjm_pin import EquilibriumSolver, loaded_stiffness
 from vjm_pin.cli import main
-from vjm_pin.registry import resolve_model
+from vjm_pin.model.registry import resolve_model
 
 KEYS = {"converged", "iterations", "wrench", "deflection", "stable", "stability_eigenvalues", "stiffness",
         "stiffness_unloaded", "q", "theta", "residual"}
@@ -56,7 +56,7 @@ def test_help_on_every_command(capsys):
 
 def test_curve_matrices_match_analyze_on_the_traced_state(capsys):
     """The loaded K_C at a curve point (curve --matrices) is the one of the traced equilibrium."""
-    from vjm_pin.solver import trace_curve
+    from vjm_pin.analysis.curve import trace_curve
 
     assert main(["curve", "paper-c-s", "--direction", "-1", "0", "0", "--max-deflection", "0.002", "--steps", "4",
                  "--matrices", "--json"]) == 0

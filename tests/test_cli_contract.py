@@ -26,7 +26,7 @@ from pathlib import Path
 import pytest
 
 from vjm_pin.cli import NEGATIVE_NUMBER, build_parser, main
-from vjm_pin.registry import bundled_models
+from vjm_pin.model.registry import bundled_models
 
 UNWRITABLE = "/proc/1"  # not writable even for root (procfs refuses new files)
 CURVE = shlex.split("curve paper-c-s --direction -1 0 0 --max-deflection 0.01 --steps 2")
@@ -196,12 +196,12 @@ def test_bad_input_in_a_real_process(argv, fragment, work):
 # ----------------------------------------------------------------------------- outputs
 def test_output_checks_run_before_the_work(work, monkeypatch, capsys):
     """A bad --plot is reported without tracing anything."""
-    import vjm_pin.solver
+    import vjm_pin.analysis.curve
 
     def boom(*a, **k):
         raise AssertionError("the curve was traced before the output path was checked")
 
-    monkeypatch.setattr(vjm_pin.solver, "trace_curve", boom)
+    monkeypatch.setattr(vjm_pin.analysis.curve, "trace_curve", boom)
     assert main(CURVE + ["--plot", "nodir/x.png"]) == 2
     assert "does not exist" in capsys.readouterr().err
 
@@ -219,9 +219,9 @@ def test_interrupted_plot_keeps_the_previous_file(work, monkeypatch):
     """savefig interrupted half-way: the old file stays, no partial or temporary file."""
     from matplotlib.figure import Figure
 
-    from vjm_pin.plots import save_curve_plot
-    from vjm_pin.registry import resolve_model
-    from vjm_pin.solver import trace_curve
+    from vjm_pin.viz.plots import save_curve_plot
+    from vjm_pin.model.registry import resolve_model
+    from vjm_pin.analysis.curve import trace_curve
 
     curve = trace_curve(resolve_model("paper-c-s"), [-1, 0, 0], 0.002, 2)
     out = work / "c.png"

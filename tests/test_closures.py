@@ -16,14 +16,14 @@ import pinocchio as pin
 import pytest
 
 from vjm_pin import load_vjm
-from vjm_pin.closures import (
+from vjm_pin.kinematics.closures import (
     ClosureSet,
     constraint_rank,
     jlog3,
     jlog3_derivative,
     min_norm_multipliers,
 )
-from vjm_pin.dead_loads import DeadLoads, Load, parse_load_args
+from vjm_pin.kinematics.dead_loads import DeadLoads, Load, parse_load_args
 from vjm_pin.exceptions import (
     ArgumentError,
     ClosureViolated,
@@ -32,10 +32,10 @@ from vjm_pin.exceptions import (
     ModelError,
     UnknownVjmTag,
 )
-from vjm_pin.frames import FrameKinematics
-from vjm_pin.kinematics import Kinematics
+from vjm_pin.kinematics.frames import FrameKinematics
+from vjm_pin.kinematics.chain import Kinematics
 from vjm_pin.loads import LinkLoads, generalized_load, load_hessian
-from vjm_pin.model import COMPONENTS, Closure
+from vjm_pin.model.format import COMPONENTS, Closure
 
 from . import portal_frame as pf
 from .chains import random_chain_urdf
@@ -733,7 +733,7 @@ def test_portal_generator_parameters_reach_the_file():
 def test_the_tree_solver_refuses_closed_models_until_the_mechanism_solver():
     """The open-chain solver would ignore the closures (a silent wrong stiffness): models with
     closures are refused by name resolution (CLI and Python) until the mechanism solver lands."""
-    from vjm_pin.registry import resolve_model
+    from vjm_pin.model.registry import resolve_model
 
     with pytest.raises(ModelError, match="loop closures \\(right_foot\\)"):
         resolve_model("portal-frame")

@@ -1,4 +1,4 @@
-"""Critical points that do not depend on the step (issue 12, item 2; vjm_pin/solver/curve.py).
+"""Critical points that do not depend on the step (issue 12, item 2; vjm_pin/analysis/curve.py).
 
 Checked independently of the tracer's own code paths where possible:
 - the same critical forces (1e-4 relative, as the issue's acceptance) and kinds for coarse
@@ -21,8 +21,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from vjm_pin.registry import bundled_models, resolve_model
-from vjm_pin.solver import EquilibriumSolver, blocks_at, check_stability, trace_curve
+from vjm_pin.model.registry import bundled_models, resolve_model
+from vjm_pin.solver import EquilibriumSolver, blocks_at, check_stability
+from vjm_pin.analysis.curve import trace_curve
 from vjm_pin.solver.stability import check_stability_held
 
 X = [-1.0, 0.0, 0.0]
@@ -152,7 +153,7 @@ def test_force_maximum_and_minimum_inside_one_step():
 def test_task_not_a_prefix(components, direction):
     """Item 4: a task that is not a prefix of x y z rx ry rz traced (it raised IndexError);
     every point against an equilibrium re-solved at the same deflection."""
-    from vjm_pin.model import load_vjm
+    from vjm_pin.model.format import load_vjm
 
     with open(bundled_models()["paper-a-pi"], encoding="utf-8") as f:
         src = f.read()

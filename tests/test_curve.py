@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 from vjm_pin.exceptions import InputError
-from vjm_pin.paper_models import PAPER_BEAM
-from vjm_pin.registry import resolve_model
-from vjm_pin.solver import CriticalPoint, Curve, CurvePoint, trace_curve  # noqa: F401  (public API)
-from vjm_pin.solver.curve import IMPERFECT_RATIO
+from vjm_pin.model.paper_models import PAPER_BEAM
+from vjm_pin.model.registry import resolve_model
+from vjm_pin.analysis.curve import CriticalPoint, Curve, CurvePoint, trace_curve  # noqa: F401  (public API)
+from vjm_pin.analysis.curve import IMPERFECT_RATIO
 
 KTHETA = 1.0  # N·m/rad: Model A springs, and Kθ of Models B/C by construction
 L = 1.0
@@ -219,8 +219,8 @@ def test_subdivision_converges_to_euler():
     """Model C, S posture, links split into k sub-links: the VJM error is O(1/k²), so the
     Richardson limit (4F₄ − F₂)/3 must match Euler's pinned–pinned column of length 3L
     bending about y, π²EI_y/(3L)², within 2 %; k = 1 is the (√21−3)EI_y/L² chain."""
-    from vjm_pin.registry import bundled_models
-    from vjm_pin.subdivide import subdivide_model
+    from vjm_pin.model.registry import bundled_models
+    from vjm_pin.model.subdivide import subdivide_model
 
     b = PAPER_BEAM
     ei_y = b["E"] * b["b"] * b["a"] ** 3 / 12
@@ -241,10 +241,10 @@ def test_subdivision_converges_to_euler():
 
 def test_subdivide_matches_generator_and_rejects_bad_input(tmp_path):
     from vjm_pin.exceptions import ModelError, SpecError
-    from vjm_pin.model import load_vjm
-    from vjm_pin.paper_models import paper_model_urdf
-    from vjm_pin.registry import bundled_models
-    from vjm_pin.subdivide import subdivide_vjm
+    from vjm_pin.model.format import load_vjm
+    from vjm_pin.model.paper_models import paper_model_urdf
+    from vjm_pin.model.registry import bundled_models
+    from vjm_pin.model.subdivide import subdivide_vjm
 
     text = subdivide_vjm(bundled_models()["paper-b-z"], 3)
     a = load_vjm(text)
@@ -352,9 +352,9 @@ def test_force_maximum_after_buckling_is_a_limit_point():
     between two steps, reported the buckling only.)"""
     import math
 
-    from vjm_pin.generator import generate_vjm
-    from vjm_pin.model import load_vjm
-    from vjm_pin.paper_models import base_angle, paper_spec, rigid_chain_urdf
+    from vjm_pin.model.generator import generate_vjm
+    from vjm_pin.model.format import load_vjm
+    from vjm_pin.model.paper_models import base_angle, paper_spec, rigid_chain_urdf
 
     spec = paper_spec("c", "pi", beam=PAPER_BEAM)
     qa = math.radians(-45)

@@ -12,10 +12,10 @@ import pytest
 
 from vjm_pin.cli import main
 from vjm_pin.cli.view import curve_page
-from vjm_pin.registry import resolve_model
+from vjm_pin.model.registry import resolve_model
 from vjm_pin.solver import EquilibriumSolver
-from vjm_pin.solver.curve import trace_curve
-from vjm_pin.viewer import default_scale, magnify
+from vjm_pin.analysis.curve import trace_curve
+from vjm_pin.viz.viewer import default_scale, magnify
 
 from .browser import chromium, screenshot_frames
 
@@ -118,7 +118,7 @@ def test_demo_writes_page_and_reports_buckling(tmp_path, capsys, c_curve):
     assert k_after < 0.01 * k_before
     html = tmp_path / "curve.html"
     assert html.is_file() and str(html.resolve()) in out
-    if importlib.util.find_spec("vjm_pin.plots") is not None:
+    if importlib.util.find_spec("vjm_pin.viz.plots") is not None:
         png = tmp_path / "curve.png"
         assert png.is_file() and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
         assert str(png.resolve()) in out

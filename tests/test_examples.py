@@ -114,7 +114,7 @@ def test_workspace_map_dask(tmp_path):
     summary = json.loads((tmp_path / "map.json").read_text())
     assert summary["dask_equals_serial"] is True
     # Re-solve two mapped poses here, directly (eq. 5 under the wrench), and compare.
-    from vjm_pin.registry import resolve_model
+    from vjm_pin.model.registry import resolve_model
     from vjm_pin.solver import EquilibriumSolver
 
     vm = resolve_model("ur5")

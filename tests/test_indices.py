@@ -1,4 +1,4 @@
-"""Weakest translational stiffness (vjm_pin.indices): against a closed form, against finite
+"""Weakest translational stiffness (vjm_pin.analysis.indices): against a closed form, against finite
 differences of re-solved equilibria (force-driven with the end free, deflection-driven with the
 rotations held), at a singular pose and at a mechanism."""
 
@@ -10,11 +10,11 @@ import pytest
 from vjm_pin import EquilibriumSolver, generate_vjm, load_vjm, loaded_stiffness, unloaded_stiffness
 from vjm_pin.cli import main
 from vjm_pin.exceptions import InputError
-from vjm_pin.indices import lost_directions, name_direction, weakest_translation
-from vjm_pin.kinematics import Kinematics, displace
+from vjm_pin.analysis.indices import lost_directions, name_direction, weakest_translation
+from vjm_pin.kinematics.chain import Kinematics, displace
 from vjm_pin.loads import solve_loaded
-from vjm_pin.model import COMPONENTS
-from vjm_pin.registry import resolve_model
+from vjm_pin.model.format import COMPONENTS
+from vjm_pin.model.registry import resolve_model
 
 UR5_ZERO = {
     n: 0.0

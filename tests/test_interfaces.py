@@ -143,7 +143,7 @@ def test_map_json_and_csv_are_si(tmp_path, capsys):
 
 
 def test_view_json_describes_the_true_equilibria_of_the_page(tmp_path, capsys):
-    from vjm_pin.registry import resolve_model
+    from vjm_pin.model.registry import resolve_model
     from vjm_pin.solver import EquilibriumSolver
 
     html = tmp_path / "p.html"

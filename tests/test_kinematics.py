@@ -4,7 +4,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from vjm_pin.kinematics import Kinematics, fix_hessian_layout
+from vjm_pin.kinematics.chain import Kinematics, fix_hessian_layout
 from vjm_pin.solver import blocks_at
 
 from .chains import random_vjm

@@ -18,8 +18,8 @@ from vjm_pin.loads import (
     solve_loaded,
     static_residual,
 )
-from vjm_pin.paper_models import paper_model_urdf
-from vjm_pin.robots import build_robot
+from vjm_pin.model.paper_models import paper_model_urdf
+from vjm_pin.model.robots import build_robot
 
 UR5_POSE = {
     "shoulder_pan_joint": 0.2,

@@ -23,9 +23,9 @@ import pytest
 
 from vjm_pin.cli import main
 from vjm_pin.exceptions import MapInterrupted, SchedulerError
-from vjm_pin.map_backends import check_scheduler
-from vjm_pin.maps import run_map, sample_poses
-from vjm_pin.robots import build_robot
+from vjm_pin.analysis.map_backends import check_scheduler
+from vjm_pin.analysis.maps import run_map, sample_poses
+from vjm_pin.model.robots import build_robot
 
 N_BIG = 100_000  # minutes of work: an interrupt, not the end, stops these runs
 W = np.array([10.0, 0.0, -100.0, 0.0, 0.0, 0.0])
@@ -254,7 +254,7 @@ def test_an_interrupted_pool_leaves_no_worker_and_keeps_its_results(ur5):
 
 
 def test_outputs_are_atomic(tmp_path, ur5, monkeypatch):
-    from vjm_pin import maps
+    from vjm_pin.analysis import maps
 
     names, poses = sample_poses(ur5, 4, seed=1)
     res = run_map(ur5, names, poses, W, backend="serial")

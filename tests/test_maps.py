@@ -9,7 +9,7 @@ import pytest
 from vjm_pin import EquilibriumSolver, load_vjm, loaded_stiffness
 from vjm_pin.cli import main
 from vjm_pin.exceptions import InputError, JointNotFound
-from vjm_pin.maps import (
+from vjm_pin.analysis.maps import (
     evaluate_pose,
     grid_poses,
     joint_limits,
@@ -18,8 +18,8 @@ from vjm_pin.maps import (
     run_map,
     sample_poses,
 )
-from vjm_pin.paper_models import paper_model_urdf
-from vjm_pin.robots import build_robot
+from vjm_pin.model.paper_models import paper_model_urdf
+from vjm_pin.model.robots import build_robot
 
 SPRINGS = {
     "links": {

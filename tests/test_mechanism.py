@@ -16,9 +16,9 @@ import pinocchio as pin
 import pytest
 
 from vjm_pin import load_vjm
-from vjm_pin.dead_loads import Load
+from vjm_pin.kinematics.dead_loads import Load
 from vjm_pin.exceptions import InputError, NoEquilibrium, SingularStiffness
-from vjm_pin.registry import resolve_model
+from vjm_pin.model.registry import resolve_model
 from vjm_pin.solver import EquilibriumSolver, loaded_stiffness
 from vjm_pin.solver.mechanism import MechanismSolver
 

@@ -18,9 +18,9 @@ from vjm_pin import (
     loaded_stiffness,
 )
 from vjm_pin.cli import main
-from vjm_pin.kinematics import displace
-from vjm_pin.paper_models import paper_model_urdf
-from vjm_pin.registry import resolve_model
+from vjm_pin.kinematics.chain import displace
+from vjm_pin.model.paper_models import paper_model_urdf
+from vjm_pin.model.registry import resolve_model
 
 from .chains import random_vjm
 

@@ -16,7 +16,7 @@ from vjm_pin import (
     load_vjm,
 )
 from vjm_pin.cli import main
-from vjm_pin.paper_models import PAPER_BEAM, paper_model_urdf, rigid_chain_urdf
+from vjm_pin.model.paper_models import PAPER_BEAM, paper_model_urdf, rigid_chain_urdf
 
 
 def test_stock_pinocchio_loads_a_vjm_urdf():
@@ -40,7 +40,7 @@ def test_generated_spring_reproduces_beam_stiffness_and_tip_location():
     pin.framesForwardKinematics(vm.model, dv, vm.reference)
     assert np.allclose(d.oMf[rigid.getFrameId("end")].translation, dv.oMf[vm.frame_id].translation, atol=1e-12)
     assert abs(dv.oMf[vm.frame_id].translation[1]) < 1e-12  # base angle puts the end on the x axis
-    from vjm_pin.beam import Beam
+    from vjm_pin.model.beam import Beam
 
     k = Beam.from_dict({**PAPER_BEAM, "length": 1.0}).stiffness()
     assert np.allclose(vm.springs[0].stiffness, k, rtol=1e-10)

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from vjm_pin import load_vjm, loaded_stiffness, solve_equilibrium, unloaded_stiffness
-from vjm_pin.beam import Beam, section_properties
+from vjm_pin.model.beam import Beam, section_properties
 from vjm_pin.cli import main
 from vjm_pin.exceptions import (
     ArgumentError,
@@ -27,15 +27,15 @@ from vjm_pin.exceptions import (
     UrdfParseError,
     VjmError,
 )
-from vjm_pin.generator import generate_vjm
-from vjm_pin.kinematics import Kinematics
-from vjm_pin.model import NS, VJM_TAGS, check_vjm_tags, vjm_tags_markdown
-from vjm_pin.paper_models import PAPER_BEAM, paper_model_urdf, paper_spec, rigid_chain_urdf
+from vjm_pin.model.generator import generate_vjm
+from vjm_pin.kinematics.chain import Kinematics
+from vjm_pin.model.format import NS, VJM_TAGS, check_vjm_tags, vjm_tags_markdown
+from vjm_pin.model.paper_models import PAPER_BEAM, paper_model_urdf, paper_spec, rigid_chain_urdf
 from vjm_pin.parallel import is_parallel, load_parallel
-from vjm_pin.registry import bundled_models, resolve_model
-from vjm_pin.robots import build_robot, parse_q
-from vjm_pin.spec import read_spec
-from vjm_pin.subdivide import subdivide_vjm
+from vjm_pin.model.registry import bundled_models, resolve_model
+from vjm_pin.model.robots import build_robot, parse_q
+from vjm_pin.model.spec import read_spec
+from vjm_pin.model.subdivide import subdivide_vjm
 
 ROOT = Path(__file__).resolve().parent.parent
 A = paper_model_urdf("a", "s")
@@ -209,7 +209,7 @@ def test_docs_table_is_the_loader_table():
     text = (ROOT / "docs" / "format.md").read_text()
     block = re.search(r"<!-- vjm-tags:begin[^\n]*-->\n(.*?)<!-- vjm-tags:end -->", text, re.DOTALL)
     assert block, "docs/format.md lost its vjm-tags markers"
-    assert block.group(1) == vjm_tags_markdown(), "regenerate the table: vjm_pin.model.vjm_tags_markdown()"
+    assert block.group(1) == vjm_tags_markdown(), "regenerate the table: vjm_pin.model.format.vjm_tags_markdown()"
 
 
 def _vjm_elements(text: str):

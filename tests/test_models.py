@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vjm_pin.model import load_vjm
-from vjm_pin.paper_models import PAPER_BEAM, PAPER_KTHETA_FACTOR
+from vjm_pin.model.format import load_vjm
+from vjm_pin.model.paper_models import PAPER_BEAM, PAPER_KTHETA_FACTOR
 
 from .urdf_compare import urdf_differences
 

@@ -7,7 +7,7 @@ import pinocchio as pin
 import pytest
 
 from vjm_pin.exceptions import FrameNotFound, ModelError
-from vjm_pin.kinematics import Kinematics
+from vjm_pin.kinematics.chain import Kinematics
 from vjm_pin.parallel import RobotSolver, load_parallel, trace_robot_curve, transform_stiffness
 from vjm_pin.solver import unloaded_stiffness
 

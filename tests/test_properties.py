@@ -468,7 +468,7 @@ def check_hessian(pe, res, stab=None, rows=None, force=np.zeros(3), what="eq. (2
 
 def check_kc(pe, vm, res, h_rel=1e-5):
     """(b) K_C of eq. (30) against central differences of re-solved equilibria."""
-    from vjm_pin.kinematics import displace
+    from vjm_pin.kinematics.chain import displace
 
     try:
         kc = loaded_stiffness(vm, res).stiffness

@@ -9,9 +9,9 @@ import pytest
 from vjm_pin import EquilibriumSolver, loaded_stiffness, unloaded_stiffness
 from vjm_pin.cli import main
 from vjm_pin.exceptions import FrameNotFound, InputError, JointNotFound, ModelError, SpecError
-from vjm_pin.kinematics import displace
-from vjm_pin.registry import resolve, resolve_model
-from vjm_pin.robots import (
+from vjm_pin.kinematics.chain import displace
+from vjm_pin.model.registry import resolve, resolve_model
+from vjm_pin.model.robots import (
     DEFAULT_REVOLUTE_STIFFNESS,
     AmbiguousFrame,
     UnknownRobot,

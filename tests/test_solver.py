@@ -11,7 +11,7 @@ from vjm_pin import (
     loaded_stiffness,
     unloaded_stiffness,
 )
-from vjm_pin.paper_models import paper_model_urdf
+from vjm_pin.model.paper_models import paper_model_urdf
 from vjm_pin.solver import (
     blocks_at,
     check_stability,
@@ -143,7 +143,7 @@ def check_fd_consistency(vm, solver, res, rng, n_dirs=3, h=1e-6):
         d = np.zeros(6)
         d[task] = rng.standard_normal(len(task))
         d *= h / np.linalg.norm(d)
-        from vjm_pin.kinematics import displace
+        from vjm_pin.kinematics.chain import displace
 
         outs = []
         for s in (+1, -1):
@@ -219,7 +219,7 @@ def test_fast_fail_makes_one_attempt():
     """``fast_fail`` (trial points of line searches): no perturbed restarts, so from the straight
     Model C chain past buckling it returns the unstable equilibrium a full solve leaves, in a
     fraction of the iterations; an impossible target raises without continuation."""
-    from vjm_pin.registry import resolve_model
+    from vjm_pin.model.registry import resolve_model
 
     vm = resolve_model("paper-c-s")
     solver = EquilibriumSolver(vm)

@@ -9,13 +9,14 @@ import numpy as np
 import pytest
 from threadpoolctl import threadpool_info, threadpool_limits
 
-import vjm_pin.kinematics as kmod
+import vjm_pin.kinematics.chain as kmod
 from vjm_pin.exceptions import InputError
-from vjm_pin.kinematics import FLUSH_BELOW, Kinematics, flush_tiny
-from vjm_pin.model import load_vjm
-from vjm_pin.paper_models import PAPER_BEAM, paper_model_urdf
-from vjm_pin.registry import resolve_model
-from vjm_pin.solver import EquilibriumSolver, loaded_stiffness, trace_curve
+from vjm_pin.kinematics.chain import FLUSH_BELOW, Kinematics, flush_tiny
+from vjm_pin.model.format import load_vjm
+from vjm_pin.model.paper_models import PAPER_BEAM, paper_model_urdf
+from vjm_pin.model.registry import resolve_model
+from vjm_pin.solver import EquilibriumSolver, loaded_stiffness
+from vjm_pin.analysis.curve import trace_curve
 from vjm_pin.solver import threads as tmod
 
 COMPRESSION = np.array([-1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
@@ -129,8 +130,8 @@ def test_blas_policy_switch_off_leaves_pools_alone(two_blas_threads, monkeypatch
 
 
 def test_map_pose_one_blas_thread_and_shared_kinematics(two_blas_threads, monkeypatch):
-    from vjm_pin import maps
-    from vjm_pin.robots import build_robot
+    from vjm_pin.analysis import maps
+    from vjm_pin.model.robots import build_robot
 
     vm = build_robot("ur5").vm
     names, poses = maps.sample_poses(vm, 3, seed=1)
@@ -159,7 +160,7 @@ def test_map_pose_one_blas_thread_and_shared_kinematics(two_blas_threads, monkey
 
 def test_no_gravity_skips_link_load_terms_same_blocks():
     from vjm_pin.loads import LinkLoads, load_hessian, loaded_blocks, static_residual
-    from vjm_pin.robots import build_robot
+    from vjm_pin.model.robots import build_robot
     from vjm_pin.solver import blocks_at
 
     vm = build_robot("ur5").vm

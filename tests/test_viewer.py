@@ -1,4 +1,4 @@
-"""Tests of vjm_pin.viewer: scene geometry, animation commands, and the exported page
+"""Tests of vjm_pin.viz.viewer: scene geometry, animation commands, and the exported page
 rendered in headless Chromium (skipped when no chromium binary is installed)."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import pinocchio as pin
 import pytest
 
 from vjm_pin.exceptions import FrameNotFound, InputError, JointNotFound, RoleError
-from vjm_pin.viewer import (
+from vjm_pin.viz.viewer import (
     STABLE_COLOR,
     STYLE_COLORS,
     Animation,
@@ -389,7 +389,7 @@ def test_example_robot_data_robots_show_their_meshes():
     """ur5 from example-robot-data: the VJM URDF keeps its <visual> meshes, and the viewer
     uses them (DAE files resolved through package://); generated chains get primitives."""
     from vjm_pin.cli.view import robot_geometry
-    from vjm_pin.registry import resolve_model
+    from vjm_pin.model.registry import resolve_model
 
     vm = resolve_model("ur5")
     geom = robot_geometry(vm)
@@ -411,14 +411,14 @@ MAX_DEFLECTION, STEPS, N_CURVE_FRAMES = 0.05, 20, 61
 
 @pytest.fixture(scope="module")
 def c_model():
-    from vjm_pin.registry import resolve_model
+    from vjm_pin.model.registry import resolve_model
 
     return resolve_model(PAPER)
 
 
 @pytest.fixture(scope="module")
 def c_curve_all(c_model):
-    from vjm_pin.solver.curve import trace_curve
+    from vjm_pin.analysis.curve import trace_curve
 
     return trace_curve(c_model, COMPRESS, MAX_DEFLECTION, STEPS, all_branches=True)
 
@@ -553,7 +553,7 @@ def test_view_wrench_frames_are_equilibria_along_the_load_path(tmp_path, capsys)
     (re-solved from the unloaded robot, independently of the warm-started path), and its
     label and slider value give that load in N."""
     from vjm_pin.cli import main
-    from vjm_pin.registry import resolve_model
+    from vjm_pin.model.registry import resolve_model
     from vjm_pin.solver import EquilibriumSolver
 
     page = tmp_path / "ur5.html"
@@ -586,7 +586,7 @@ def test_view_deflection_frames_label_their_true_force(tmp_path, capsys):
     """paper-a-s: the old page labelled linear joint-space interpolations "load ×t"; now
     each frame's label gives the force of the equilibrium at t·δ, solved independently."""
     from vjm_pin.cli import main
-    from vjm_pin.registry import resolve_model
+    from vjm_pin.model.registry import resolve_model
     from vjm_pin.solver import EquilibriumSolver
 
     page = tmp_path / "a.html"

@@ -8,7 +8,7 @@ force–deflection curves with buckling.
 
 from typing import TYPE_CHECKING
 
-from .exceptions import (
+from vjm_pin.exceptions import (
     EquilibriumCheckError,
     FrameNotFound,
     InputError,
@@ -27,9 +27,9 @@ from .exceptions import (
 # (PEP 562 ``__getattr__``), so ``import vjm_pin.cli`` is quick and the ``vjm-pin`` command
 # handles a Ctrl-C during those imports (no traceback). Add a new export to both lists.
 if TYPE_CHECKING:
-    from .generator import generate_vjm, load_spec
-    from .model import SpringGroup, VjmModel, load_vjm
-    from .solver import (
+    from vjm_pin.model.generator import generate_vjm, load_spec
+    from vjm_pin.model.format import SpringGroup, VjmModel, load_vjm
+    from vjm_pin.solver import (
         EquilibriumResult,
         EquilibriumSolver,
         StabilityResult,
@@ -43,8 +43,8 @@ if TYPE_CHECKING:
     )
 
 _LAZY = {
-    ".generator": ("generate_vjm", "load_spec"),
-    ".model": ("SpringGroup", "VjmModel", "load_vjm"),
+    ".model.generator": ("generate_vjm", "load_spec"),
+    ".model.format": ("SpringGroup", "VjmModel", "load_vjm"),
     ".solver": (
         "EquilibriumResult",
         "EquilibriumSolver",

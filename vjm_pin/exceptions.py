@@ -149,7 +149,7 @@ class MapInterrupted(KeyboardInterrupt):
     general still sees it. It carries what was finished.
 
     Attributes:
-        result: A :class:`~vjm_pin.maps.MapResult` of the poses finished before the
+        result: A :class:`~vjm_pin.analysis.maps.MapResult` of the poses finished before the
             interrupt (possibly none), in the order they were requested.
         requested: The number of poses the map was asked for.
     """

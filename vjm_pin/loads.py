@@ -31,9 +31,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 import pinocchio as pin
 
-from .exceptions import InputError, NoEquilibrium, VjmError
-from .kinematics import Kinematics, deflection
-from .model import VjmModel
+from vjm_pin.exceptions import InputError, NoEquilibrium, VjmError
+from vjm_pin.kinematics.chain import Kinematics, deflection
+from vjm_pin.model.format import VjmModel
 
 #: Standard gravity (m/s²), ISO 80000-3.
 STANDARD_GRAVITY = 9.80665
@@ -116,7 +116,7 @@ def potential_energy(vm: VjmModel, loads: LinkLoads, x: np.ndarray) -> float:
 def loaded_blocks(vm: VjmModel, x, wrench, loads: LinkLoads, kin: Kinematics | None = None):
     """:class:`~vjm_pin.solver.Blocks` at ``x`` under the end ``wrench`` with ``H + H^G``
     (eq. 28'): feed it to ``stiffness_from_blocks`` and ``check_stability``."""
-    from .solver import blocks_at
+    from vjm_pin.solver import blocks_at
 
     b = blocks_at(vm, x, wrench, kin)
     if not np.any(loads.gravity):  # H^G = 0 without link loads
@@ -201,8 +201,8 @@ def solve_loaded(
         InputError: a wrench with components outside the task.
         NoEquilibrium: Newton did not converge (e.g. the load exceeds a buckling load).
     """
-    from .exceptions import SingularStiffness
-    from .solver import check_stability, stiffness_from_blocks
+    from vjm_pin.exceptions import SingularStiffness
+    from vjm_pin.solver import check_stability, stiffness_from_blocks
 
     if vm.n_q:
         raise LoadError(

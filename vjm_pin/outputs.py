@@ -21,7 +21,7 @@ import tempfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
-from .exceptions import OutputError
+from vjm_pin.exceptions import OutputError
 
 #: Extensions matplotlib writes without extra packages (``savefig`` picks the format from them).
 PLOT_EXTENSIONS = (

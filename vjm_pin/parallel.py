@@ -12,7 +12,7 @@ reference point expressed in that link's frame (a constant rigid offset). A leg 
 joints on the path from the root link to its ``frame``; every joint of the robot belongs to at
 least one leg, and a spring group may not be split between legs.
 
-Each leg is turned into its own :class:`~vjm_pin.model.VjmModel` (a URDF of the path, plus a
+Each leg is turned into its own :class:`~vjm_pin.model.format.VjmModel` (a URDF of the path, plus a
 fixed joint carrying the offset to a frame ``<leg>__platform`` whose orientation is world-aligned
 at the reference configuration). So every leg's end frame is the same platform frame, and the
 wrench transformation of the offset (``K_P = Tᵀ K_E T`` unloaded, plus the loaded geometric
@@ -36,11 +36,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .exceptions import FrameNotFound, InputError, ModelError, NoEquilibrium, SingularStiffness
-from .kinematics import deflection as _deflection
-from .kinematics import displace
-from .model import COMPONENTS, NS, VjmModel, _parse_numbers, _read_root, load_vjm
-from .solver import EquilibriumResult, EquilibriumSolver, loaded_stiffness
+from vjm_pin.exceptions import FrameNotFound, InputError, ModelError, NoEquilibrium, SingularStiffness
+from vjm_pin.kinematics.chain import deflection as _deflection
+from vjm_pin.kinematics.chain import displace
+from vjm_pin.model.format import COMPONENTS, NS, VjmModel, _parse_numbers, _read_root, load_vjm
+from vjm_pin.solver import EquilibriumResult, EquilibriumSolver, loaded_stiffness
 
 _Q = f"{{{NS}}}"
 
@@ -478,7 +478,7 @@ class RobotCurvePoint:
 
     @property
     def deflection(self) -> float:
-        """Alias of ``s`` (the name :class:`vjm_pin.solver.CurvePoint` uses)."""
+        """Alias of ``s`` (the name :class:`vjm_pin.analysis.curve.CurvePoint` uses)."""
         return self.s
 
     @property
@@ -765,7 +765,7 @@ def trace_robot_force_curve(
     without, the platform is held (``solve(s·d)``, as :func:`trace_robot_curve`).
     Stability: every leg stable (eq. 23) and, free, ``BᵀK_C B`` positive definite.
 
-    Critical points (rule of :mod:`vjm_pin.solver.curve`): between a stable point ``a`` and
+    Critical points (rule of :mod:`vjm_pin.analysis.curve`): between a stable point ``a`` and
     the next ``b``, when ``b`` is unstable, was reached by leaving a saddle, or its stiffness
     is below :data:`ROBOT_DROP_RATIO` × ``a``'s. If the branch continued from ``a`` without
     leaving saddles loses the positive definiteness of ``BᵀK_C B`` before ``b``, the root of
@@ -840,7 +840,7 @@ def _min_lam(at, s, start):
 def _refine_robot(at, rs, d, b, a: RobotCurvePoint, bpt: RobotCurvePoint, index, refine_tol):
     """Locate the critical point between ``a`` (stable) and ``bpt`` (see
     :func:`trace_robot_force_curve`)."""
-    from .solver.curve import MAX_BISECTIONS, illinois
+    from vjm_pin.analysis.curve import MAX_BISECTIONS, illinois
 
     lo, flo = _min_lam(at, a.s, a.equilibrium)
     hi, fhi = None, None

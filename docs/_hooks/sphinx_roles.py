@@ -1,8 +1,8 @@
 """Griffe extension for the API pages: Sphinx roles in docstrings become inline code.
 
 The docstrings of vjm_pin are read by humans in the source, in ``help()`` and on this site;
-they write cross-references the Sphinx way (:class:`~vjm_pin.model.VjmModel`,
-:func:`vjm_pin.beam.cantilever_compliance`). Markdown would show the role literally, so this
+they write cross-references the Sphinx way (:class:`~vjm_pin.model.format.VjmModel`,
+:func:`vjm_pin.model.beam.cantilever_compliance`). Markdown would show the role literally, so this
 extension rewrites each role into inline code (``VjmModel`` for the ``~`` short form, the
 full path otherwise) before mkdocstrings renders the docstring. Nothing in the package is
 changed.

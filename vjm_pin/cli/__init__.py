@@ -86,7 +86,7 @@ def version() -> str:
     try:
         return metadata.version("vjm_pin")
     except metadata.PackageNotFoundError:
-        from .. import __version__
+        from vjm_pin import __version__
 
         return __version__
 
@@ -105,7 +105,7 @@ def build_parser() -> argparse.ArgumentParser:
         ),
         epilog=EPILOG,
     )
-    from .common import HelpFormatter, add_verbosity_options, examples_epilog
+    from vjm_pin.cli.common import HelpFormatter, add_verbosity_options, examples_epilog
 
     parser.formatter_class = HelpFormatter
     add_verbosity_options(parser)
@@ -128,13 +128,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 def analysis_failures() -> tuple:
     """The errors of an analysis that fails on a valid input (exit status 3)."""
-    from ..exceptions import NoEquilibrium, SingularStiffness
+    from vjm_pin.exceptions import NoEquilibrium, SingularStiffness
 
     return (NoEquilibrium, SingularStiffness)  # EquilibriumCheckError is a NoEquilibrium
 
 
 def _run(argv) -> int:
-    from ..exceptions import VjmError
+    from vjm_pin.exceptions import VjmError
 
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -160,7 +160,7 @@ def _run(argv) -> int:
 
 def _hint(e) -> str:
     """Where the command line lists the names an error did not find."""
-    from ..robots import UnknownRobot
+    from vjm_pin.model.robots import UnknownRobot
 
     if isinstance(e, UnknownRobot):
         return "see 'vjm-pin models' and 'vjm-pin models --robots'"

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .common import MAX_SUBDIVIDE, int_range
+from vjm_pin.cli.common import MAX_SUBDIVIDE, int_range
 
 EXAMPLES = (
     "vjm-pin analyze paper-a-s --deflection -0.001 0 0",
@@ -32,7 +32,7 @@ UNIT_KEYS = (
 def analyze_json(body: dict) -> dict:
     """The ``analyze --json`` object: :func:`vjm_pin.cli.common.envelope` over ``body`` with
     every key of :data:`KEYS` (missing ones null), in that order."""
-    from .common import envelope
+    from vjm_pin.cli.common import envelope
 
     extra = set(body) - set(KEYS)
     if extra:
@@ -123,15 +123,15 @@ def add_parser(sub):
 
 def weakest_direction(k6: np.ndarray, task, lost=()) -> dict | None:
     """Weakest translational stiffness with the end free in all other task components (free to
-    rotate): :func:`vjm_pin.indices.weakest_translation` on the task block of K_C, as a JSON
+    rotate): :func:`vjm_pin.analysis.indices.weakest_translation` on the task block of K_C, as a JSON
     mapping (stiffness N/m, unit direction in world axes, its definition, the free and lost
     directions). None without K_C or without a translational task component.
 
     Args:
         k6: (6, 6) K_C (zero rows outside the task) or None. task: task component indices.
-        lost: Names of the directions a singular pose loses (:func:`vjm_pin.indices.lost_directions`).
+        lost: Names of the directions a singular pose loses (:func:`vjm_pin.analysis.indices.lost_directions`).
     """
-    from ..indices import weakest_translation
+    from vjm_pin.analysis.indices import weakest_translation
 
     t = list(task)
     if k6 is None or not any(c < 3 for c in t):
@@ -156,8 +156,8 @@ def control_dict(vm, held) -> dict:
 
 def analysis_dict(vm, res, method="eq30") -> dict:
     """The JSON object of ``analyze`` for an equilibrium ``res`` of model ``vm``."""
-    from ..exceptions import SingularStiffness
-    from ..solver import loaded_stiffness, unloaded_stiffness
+    from vjm_pin.exceptions import SingularStiffness
+    from vjm_pin.solver import loaded_stiffness, unloaded_stiffness
 
     out = {
         "model": vm.name,
@@ -199,10 +199,10 @@ def loaded_dict(vm, eq, method="eq30", gravity=False, loads=None) -> dict:
     """The JSON object of ``analyze`` for a :class:`~vjm_pin.loads.LoadedEquilibrium`
     (every task component loaded: ``stable`` is ``K − H − H^G`` positive definite,
     ``stable_end_held`` eq. 23)."""
-    from ..exceptions import SingularStiffness
-    from ..loads import LinkLoads, loaded_blocks
-    from ..solver import unloaded_stiffness
-    from ..solver.stability import check_stability_held
+    from vjm_pin.exceptions import SingularStiffness
+    from vjm_pin.loads import LinkLoads, loaded_blocks
+    from vjm_pin.solver import unloaded_stiffness
+    from vjm_pin.solver.stability import check_stability_held
 
     b = loaded_blocks(vm, eq.x, eq.wrench, loads if loads is not None else LinkLoads(np.zeros(3)))
     free = check_stability_held(b, np.zeros((0, len(vm.task))))
@@ -243,9 +243,9 @@ def loaded_dict(vm, eq, method="eq30", gravity=False, loads=None) -> dict:
 
 def load_from_args(args, allow_closures=False):
     """(vm, robot) for the model options of ``args`` (see :func:`add_robot_options`); models
-    with loop closures only with ``allow_closures`` (:func:`vjm_pin.registry.resolve`)."""
-    from ..registry import resolve
-    from ..robots import parse_q
+    with loop closures only with ``allow_closures`` (:func:`vjm_pin.model.registry.resolve`)."""
+    from vjm_pin.model.registry import resolve
+    from vjm_pin.model.robots import parse_q
 
     return resolve(
         args.model,
@@ -258,11 +258,11 @@ def load_from_args(args, allow_closures=False):
 
 
 def run(args) -> int:
-    from ..exceptions import InputError
-    from ..loads import LinkLoads, payload_wrench, solve_loaded
-    from ..solver import EquilibriumSolver
-    from .common import finite_vector
-    from .parallel_cmds import is_parallel_model, run_analyze
+    from vjm_pin.exceptions import InputError
+    from vjm_pin.loads import LinkLoads, payload_wrench, solve_loaded
+    from vjm_pin.solver import EquilibriumSolver
+    from vjm_pin.cli.common import finite_vector
+    from vjm_pin.cli.parallel_cmds import is_parallel_model, run_analyze
 
     if is_parallel_model(args.model):  # parallel robots (<vjm:leg> tags): vjm_pin/cli/parallel_cmds.py
         return run_analyze(args)
@@ -270,7 +270,7 @@ def run(args) -> int:
     if vm.closures:  # a closed mechanism: vjm_pin.solver.MechanismSolver
         return _run_mechanism(args, vm)
     if args.subdivide != 1:
-        from ..subdivide import subdivide_model
+        from vjm_pin.model.subdivide import subdivide_model
 
         if args.subdivide < 1:
             raise InputError(f"--subdivide must be a positive integer, got {args.subdivide}")
@@ -296,8 +296,8 @@ def run(args) -> int:
             solver = EquilibriumSolver(vm)
             res = solver.verify(solver.solve_wrench(w), method=args.method)
             out = analysis_dict(vm, res, args.method)
-    from ..indices import lost_directions, name_direction
-    from ..model import COMPONENTS
+    from vjm_pin.analysis.indices import lost_directions, name_direction
+    from vjm_pin.model.format import COMPONENTS
 
     # a robot's default task drops the directions its pose cannot move (robots.default_task)
     lost = [name_direction(v, COMPONENTS) for v in lost_directions(vm)] if robot is not None else []
@@ -312,10 +312,10 @@ def _run_mechanism(args, vm) -> int:
     """``analyze`` of a model with loop closures (:class:`~vjm_pin.solver.MechanismSolver`): every
     task component held for ``--deflection`` (or no load), loaded for ``--wrench``; ``--payload``
     and ``--gravity`` are dead loads (a weight at the end frame, the link weights)."""
-    from ..dead_loads import STANDARD_GRAVITY, Load
-    from ..exceptions import InputError, SingularStiffness
-    from ..solver import MechanismSolver
-    from .common import finite_vector
+    from vjm_pin.kinematics.dead_loads import STANDARD_GRAVITY, Load
+    from vjm_pin.exceptions import InputError, SingularStiffness
+    from vjm_pin.solver import MechanismSolver
+    from vjm_pin.cli.common import finite_vector
 
     if args.subdivide != 1:
         raise InputError("--subdivide is not available for models with loop closures")
@@ -348,7 +348,7 @@ def _run_mechanism(args, vm) -> int:
 
 def _emit(args, vm, robot, out) -> int:
     """Finish the ``analyze`` object (load options) and print it: ``--json`` or text."""
-    from .common import dump_json, fmt_matrix
+    from vjm_pin.cli.common import dump_json, fmt_matrix
 
     out["payload"] = args.payload
     out["gravity"] = bool(args.gravity)
@@ -392,7 +392,7 @@ def analysis_dict_mechanism(vm, res) -> dict:
 
 def _summary(args, out) -> None:
     """The ``--verbose`` line of ``analyze``."""
-    from .common import summary
+    from vjm_pin.cli.common import summary
 
     verdict = "stable" if out.get("stable") is not False else "UNSTABLE"
     summary(args, f"{out['model']}: {'converged' if out.get('converged') else 'NOT converged'}, {verdict}")

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from ..exceptions import InputError
+from vjm_pin.exceptions import InputError
 
 
 def finite_vector(values, name: str, sizes=(3, 6)) -> np.ndarray:
@@ -75,7 +75,7 @@ OUTPUT_NOTE = "checked before the work starts, written atomically; an existing f
 def input_files(args) -> list:
     """The input files a command reads, from its ``args``: the model (a URDF path, or the file
     of a bundled model) and ``--springs``. Outputs must never be one of them."""
-    from .parallel_cmds import model_path
+    from vjm_pin.cli.parallel_cmds import model_path
 
     files = []
     model = getattr(args, "model", None)
@@ -91,7 +91,7 @@ def check_output_option(args, option: str, extensions):
     """Check the file of the output option ``option`` (``"--plot"``) before the work starts
     (:func:`vjm_pin.outputs.check_output`, the inputs being :func:`input_files`); returns its
     Path, or None when the option is not given. Raises :class:`~vjm_pin.exceptions.OutputError`."""
-    from ..outputs import check_output
+    from vjm_pin.outputs import check_output
 
     value = getattr(args, option.lstrip("-").replace("-", "_"), None)
     if value is None:
@@ -153,7 +153,7 @@ def envelope(command: str, body: dict, units=None) -> dict:
     """The JSON object of ``command``: ``version`` (package version), ``command``, ``units``
     (:data:`UNITS` restricted to the names ``units``, all of it for None, or ``units`` itself
     when it is a dict) first, then ``body``."""
-    from . import version
+    from vjm_pin.cli import version
 
     if isinstance(units, dict):
         names = units
@@ -267,3 +267,32 @@ def summary(args, text: str) -> None:
         t0 = getattr(args, "_t0", None)
         took = f" ({time.perf_counter() - t0:.1f} s)" if t0 is not None else ""
         print(f"vjm-pin: {args.command}: {text}{took}", file=sys.stderr)
+
+
+LOAD_HELP = (
+    "dead load at a frame of the model: FRAME FX FY FZ [MX MY MZ] (N, N·m, world axes; force at the "
+    "frame's origin); repeat for several loads"
+)
+
+
+def add_load_option(parser) -> None:
+    """``--load FRAME FX FY FZ [MX MY MZ]`` (repeatable), one spelling for every command."""
+    parser.add_argument(
+        "--load",
+        nargs="+",
+        action="append",
+        metavar="FRAME_FX_FY_FZ",
+        default=None,
+        help=LOAD_HELP,
+    )
+
+
+def loads_from_args(args) -> tuple:
+    """The :class:`~vjm_pin.kinematics.dead_loads.Load` tuple of ``--load`` (empty when absent).
+
+    Raises:
+        InputError: a wrong count or a word that is not a finite number (one line).
+    """
+    from vjm_pin.kinematics.dead_loads import parse_load_args
+
+    return parse_load_args(getattr(args, "load", None))

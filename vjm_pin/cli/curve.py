@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .common import MAX_SUBDIVIDE, OUTPUT_NOTE, int_range, positive_float
+from vjm_pin.cli.common import MAX_SUBDIVIDE, OUTPUT_NOTE, int_range, positive_float
 
 EXAMPLES = (
     "vjm-pin curve paper-c-s --direction -1 0 0 --max-deflection 0.05 --steps 40 --plot curve.png",
@@ -33,7 +33,7 @@ def curve_json(body: dict) -> dict:
     """The ``curve --json`` object: :func:`vjm_pin.cli.common.envelope` over ``body``, every
     key of :data:`CURVE_KEYS`, :data:`POINT_KEYS` and :data:`CRITICAL_KEYS` present (null
     where it does not apply)."""
-    from .common import envelope
+    from vjm_pin.cli.common import envelope
 
     def point(d):
         return {**{k: d.get(k) for k in POINT_KEYS}, **({"stiffness": d["stiffness"]} if "stiffness" in d else {})}
@@ -124,14 +124,14 @@ def add_parser(sub):
 
 def load_model(name: str, subdivide: int = 1):
     """Resolve ``name`` (path or bundled model) and subdivide its beam links if asked."""
-    from ..exceptions import InputError
-    from ..registry import bundled_models, resolve_model
+    from vjm_pin.exceptions import InputError
+    from vjm_pin.model.registry import bundled_models, resolve_model
 
     if subdivide < 1:
         raise InputError(f"--subdivide must be a positive integer, got {subdivide}")
     if subdivide == 1:
         return resolve_model(name)
-    from ..subdivide import subdivide_model
+    from vjm_pin.model.subdivide import subdivide_model
 
     src = bundled_models().get(name, name)
     if not Path(src).is_file():
@@ -169,8 +169,8 @@ def critical_dict(c) -> dict:
 
 def stiffness_matrix(vm, p):
     """Loaded K_C (6, 6) at a traced point (eq. 30), or None where it is singular/infinite."""
-    from ..exceptions import SingularStiffness
-    from ..solver import loaded_stiffness
+    from vjm_pin.exceptions import SingularStiffness
+    from vjm_pin.solver import loaded_stiffness
 
     try:
         return loaded_stiffness(vm, p.equilibrium).stiffness
@@ -200,7 +200,7 @@ def trace_and_plot(trace, args, name: str):
     and write ``--plot``; shared by single-chain and parallel curves. Returns the curve."""
     import numpy as np
 
-    from .common import Progress, summary
+    from vjm_pin.cli.common import Progress, summary
 
     with Progress(args, args.steps + 1, f"curve {name}") as bar:
         curve = trace(bar.update)
@@ -208,7 +208,7 @@ def trace_and_plot(trace, args, name: str):
     crit = ", ".join(f"{c.kind} at {c.force:.6g} {fu}" for c in curve.critical) or "none"
     summary(args, f"{name}: {len(curve.points)} points, critical points: {crit}")
     if args.plot is not None:
-        from ..plots import save_curve_plot
+        from vjm_pin.viz.plots import save_curve_plot
 
         save_curve_plot(
             curve,
@@ -221,11 +221,11 @@ def trace_and_plot(trace, args, name: str):
 def run(args) -> int:
     import numpy as np
 
-    from ..exceptions import InputError
-    from ..outputs import PLOT_EXTENSIONS
-    from ..solver import trace_curve
-    from .common import check_output_option, direction_vector, dump_json
-    from .parallel_cmds import is_parallel_model, run_curve
+    from vjm_pin.exceptions import InputError
+    from vjm_pin.outputs import PLOT_EXTENSIONS
+    from vjm_pin.analysis.curve import trace_curve
+    from vjm_pin.cli.common import check_output_option, direction_vector, dump_json
+    from vjm_pin.cli.parallel_cmds import is_parallel_model, run_curve
 
     check_output_option(args, "--plot", PLOT_EXTENSIONS)  # before any work
     if is_parallel_model(
@@ -280,7 +280,7 @@ def run(args) -> int:
             f"tangent stiffness {c.stiffness_before:.6g} -> {c.stiffness_after:.6g} {fu}/{du}"
         )
     if args.matrices:
-        from .common import fmt_matrix
+        from vjm_pin.cli.common import fmt_matrix
 
         for c in curve.critical:
             for label, idx in (("before", c.index - 1), ("after", c.index)):

@@ -39,10 +39,10 @@ def add_parser(sub):
 
 
 def run(args) -> int:
-    from ..outputs import HTML_EXTENSIONS, PLOT_EXTENSIONS, check_output, check_output_dir
-    from ..registry import resolve_model
-    from .common import Progress, summary
-    from .view import curve_page, trace
+    from vjm_pin.outputs import HTML_EXTENSIONS, PLOT_EXTENSIONS, check_output, check_output_dir
+    from vjm_pin.model.registry import resolve_model
+    from vjm_pin.cli.common import Progress, summary
+    from vjm_pin.cli.view import curve_page, trace
 
     out = check_output_dir(args.out, what="--out")  # before any work
     png, html = out / "curve.png", out / "curve.html"
@@ -68,11 +68,11 @@ def run(args) -> int:
         print("no critical point on this path")
     out.mkdir(parents=True, exist_ok=True)
     try:
-        from ..plots import save_curve_plot
+        from vjm_pin.viz.plots import save_curve_plot
     except ModuleNotFoundError as e:
-        if e.name != "vjm_pin.plots":
+        if e.name != "vjm_pin.viz.plots":
             raise
-        print("plot: skipped (vjm_pin.plots is not available)")
+        print("plot: skipped (vjm_pin.viz.plots is not available)")
     else:
         save_curve_plot(
             curve,

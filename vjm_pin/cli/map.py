@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .analyze import add_robot_options
+from vjm_pin.cli.analyze import add_robot_options
 
 EXAMPLES = (
     "vjm-pin map ur5 --samples 20 --wrench 0 0 -100 --out map.csv --plot map.png",
@@ -101,13 +101,13 @@ def run(args) -> int:
     import os
     import sys
 
-    from ..exceptions import InputError, MapInterrupted
-    from ..loads import STANDARD_GRAVITY, payload_wrench
-    from ..map_backends import check_scheduler
-    from ..maps import MAX_WORKERS_PER_CORE, grid_poses, parse_grid, run_map, sample_poses
-    from ..outputs import PLOT_EXTENSIONS
-    from .analyze import load_from_args
-    from .common import check_output_option, dump_json, finite_vector
+    from vjm_pin.exceptions import InputError, MapInterrupted
+    from vjm_pin.loads import STANDARD_GRAVITY, payload_wrench
+    from vjm_pin.analysis.map_backends import check_scheduler
+    from vjm_pin.analysis.maps import MAX_WORKERS_PER_CORE, grid_poses, parse_grid, run_map, sample_poses
+    from vjm_pin.outputs import PLOT_EXTENSIONS
+    from vjm_pin.cli.analyze import load_from_args
+    from vjm_pin.cli.common import check_output_option, dump_json, finite_vector
 
     check_output_option(args, "--out", (".csv", ".npz"))  # output paths before any work
     check_output_option(args, "--plot", PLOT_EXTENSIONS)
@@ -138,7 +138,7 @@ def run(args) -> int:
         if backend != "dask":
             raise InputError("--scheduler needs the dask backend")
         _scheduler_option(check_scheduler, args.scheduler)
-    from .common import envelope, show_progress, summary
+    from vjm_pin.cli.common import envelope, show_progress, summary
 
     bar = None
     if show_progress(args):  # on a terminal only: no bars in log files
@@ -234,7 +234,7 @@ def _stats(a):
 
 def _scheduler_option(fn, *args, **kwargs):
     """``fn(*args, **kwargs)`` with a :class:`SchedulerError` worded for ``--scheduler``."""
-    from ..exceptions import SchedulerError
+    from vjm_pin.exceptions import SchedulerError
 
     try:
         return fn(*args, **kwargs)

@@ -15,7 +15,7 @@ def add_parser(sub):
         help="list the bundled VJM models (--robots: the example-robot-data robots)",
         description=(
             "List the bundled VJM models (models/urdf). With --robots, list the robots of "
-            "example-robot-data that MODEL may name (analysed with the defaults of vjm_pin.robots)."
+            "example-robot-data that MODEL may name (analysed with the defaults of vjm_pin.model.robots)."
         ),
     )
     p.add_argument("--robots", action="store_true", help="list the example-robot-data robots")
@@ -24,11 +24,11 @@ def add_parser(sub):
 
 
 def run(args) -> int:
-    from ..registry import bundled_models, models_dir
-    from .common import dump_json, envelope
+    from vjm_pin.model.registry import bundled_models, models_dir
+    from vjm_pin.cli.common import dump_json, envelope
 
     if args.robots:
-        from ..robots import robot_names, robot_source
+        from vjm_pin.model.robots import robot_names, robot_source
 
         rows = {}
         for name in robot_names():

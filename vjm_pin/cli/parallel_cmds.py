@@ -15,7 +15,7 @@ import numpy as np
 
 def model_path(name: str) -> Path | None:
     """The URDF path of ``name`` (a file or a bundled model), or None."""
-    from ..registry import bundled_models
+    from vjm_pin.model.registry import bundled_models
 
     p = Path(name)
     if p.is_file():
@@ -25,9 +25,9 @@ def model_path(name: str) -> Path | None:
 
 def is_parallel_model(name: str) -> bool:
     """True when ``name`` is a VJM URDF (file or bundled) with ``<vjm:leg>`` tags."""
-    from ..exceptions import VjmError
-    from ..parallel import is_parallel
-    from ..registry import is_vjm_urdf
+    from vjm_pin.exceptions import VjmError
+    from vjm_pin.parallel import is_parallel
+    from vjm_pin.model.registry import is_vjm_urdf
 
     p = model_path(name)
     if p is None or p.suffix != ".urdf" or not is_vjm_urdf(p):
@@ -39,7 +39,7 @@ def is_parallel_model(name: str) -> bool:
 
 
 def _reject(args, names: dict) -> None:
-    from ..exceptions import InputError
+    from vjm_pin.exceptions import InputError
 
     given = [
         flag for attr, (flag, default) in names.items() if getattr(args, attr, default) != default
@@ -59,10 +59,10 @@ def run_analyze(args) -> int:
     """``vjm-pin analyze`` on a parallel model: robot equilibrium for a platform deflection
     (each leg solved at the same platform pose, wrenches summed) or a wrench (eq. 11 on the
     aggregated stiffness), stability per leg, ``K_C = Σ K_C⁽ⁱ⁾`` (eq. 30/32/33 per leg)."""
-    from ..model import COMPONENTS
-    from ..parallel import RobotSolver, load_parallel
-    from .analyze import _summary, analyze_json, weakest_direction
-    from .common import dump_json, finite_vector, fmt_matrix
+    from vjm_pin.model.format import COMPONENTS
+    from vjm_pin.parallel import RobotSolver, load_parallel
+    from vjm_pin.cli.analyze import _summary, analyze_json, weakest_direction
+    from vjm_pin.cli.common import dump_json, finite_vector, fmt_matrix
 
     _reject(
         args,
@@ -169,10 +169,10 @@ def run_curve(args) -> int:
     translation) and is free across it (no load there), or held there with ``--held``, with
     critical-point detection (:func:`vjm_pin.parallel.trace_robot_force_curve`). A curve that
     stops early (no equilibrium found) says so, with the reason (``stopped`` in --json)."""
-    from ..exceptions import InputError
-    from ..parallel import RobotSolver, load_parallel, trace_robot_force_curve
-    from .common import direction_vector, dump_json
-    from .curve import curve_json, trace_and_plot
+    from vjm_pin.exceptions import InputError
+    from vjm_pin.parallel import RobotSolver, load_parallel, trace_robot_force_curve
+    from vjm_pin.cli.common import direction_vector, dump_json
+    from vjm_pin.cli.curve import curve_json, trace_and_plot
 
     _reject(args, {"all_branches": ("--all-branches", False), "subdivide": ("--subdivide", 1)})
     pm = load_parallel(model_path(args.model))
@@ -224,8 +224,8 @@ def _solve_wrench_or_buckling(rs, w, max_outer: int = 30, tol: float = 1e-9):
     unstable instead of searching for minutes). An unstable leg (eq. 23) or a loaded stiffness
     that is not positive definite means the wrench exceeds the critical force: raised as
     :class:`~vjm_pin.exceptions.NoEquilibrium` whose message starts with "buckling"."""
-    from ..exceptions import NoEquilibrium
-    from ..kinematics import displace
+    from vjm_pin.exceptions import NoEquilibrium
+    from vjm_pin.kinematics.chain import displace
 
     task = list(rs.task)
     res = rs.solve(np.zeros(6))

@@ -31,7 +31,7 @@ def load_schema(name: str) -> dict:
     import json
     from importlib import resources
 
-    from ..exceptions import InputError
+    from vjm_pin.exceptions import InputError
 
     if name not in SCHEMAS:
         raise InputError(f"no schema for '{name}'; one of {', '.join(SCHEMAS)}")

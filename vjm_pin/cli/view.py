@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .common import int_range, positive_float
+from vjm_pin.cli.common import int_range, positive_float
 
 log = logging.getLogger(__name__)
 
@@ -55,7 +55,7 @@ def add_parser(sub):
             "a meshcat server is started and serves until Ctrl-C."
         ),
     )
-    from .analyze import add_robot_options
+    from vjm_pin.cli.analyze import add_robot_options
 
     add_robot_options(p)  # MODEL, --q, --pose-name, --frame, --springs (as analyze)
     g = p.add_mutually_exclusive_group(required=True)
@@ -131,8 +131,8 @@ def trace(
 ):
     """The force-deflection curve of ``vm`` along ``direction`` up to ``max_deflection`` (m);
     with ``all_branches`` also the branches that leave its critical points. ``progress(done,
-    total)`` is called as points are traced (:func:`vjm_pin.solver.curve.trace_curve`)."""
-    from ..solver.curve import trace_curve
+    total)`` is called as points are traced (:func:`vjm_pin.analysis.curve.trace_curve`)."""
+    from vjm_pin.analysis.curve import trace_curve
 
     return trace_curve(
         vm, direction, max_deflection, steps, all_branches=all_branches, progress=progress
@@ -145,7 +145,7 @@ def _label(deflection_m: float, force_n: float, stable) -> str:
 
 
 def _scene(vm, frames_x, scale):
-    from ..viewer import default_scale, magnify
+    from vjm_pin.viz.viewer import default_scale, magnify
 
     if scale is None:
         scale = default_scale(vm.model, vm.reference, frames_x)
@@ -156,8 +156,8 @@ def _scene(vm, frames_x, scale):
 
 def robot_geometry(vm):
     """The robot's own visual meshes when its URDF has them (example-robot-data robots),
-    else clean primitives for generated chains (:func:`vjm_pin.viewer.chain_geometry`)."""
-    from ..viewer import chain_geometry, mesh_geometry
+    else clean primitives for generated chains (:func:`vjm_pin.viz.viewer.chain_geometry`)."""
+    from vjm_pin.viz.viewer import chain_geometry, mesh_geometry
 
     return mesh_geometry(vm.model, vm.urdf) or chain_geometry(vm.model, vm.roles)
 
@@ -202,7 +202,7 @@ def _frame(eq, s: float, d: np.ndarray, kind: str) -> CurveFrame:
 def _warm_solve(solver, s, d, start):
     """Equilibrium at deflection ``s·d`` from the state ``start`` (one Newton attempt
     first, the full solver if it fails), or None."""
-    from ..exceptions import NoEquilibrium
+    from vjm_pin.exceptions import NoEquilibrium
 
     for fast in (True, False):
         try:
@@ -238,7 +238,7 @@ def curve_frames(vm, curve, n_frames: int = DEFAULT_FRAMES, solver=None):
 
     Args:
         vm: The model.
-        curve: A :class:`vjm_pin.solver.curve.Curve` of ``vm``.
+        curve: A :class:`vjm_pin.analysis.curve.Curve` of ``vm``.
         n_frames: Number of frames wanted (at least the number of critical points + 2).
         solver: An :class:`~vjm_pin.solver.EquilibriumSolver` of ``vm`` (default: a new one).
 
@@ -247,8 +247,8 @@ def curve_frames(vm, curve, n_frames: int = DEFAULT_FRAMES, solver=None):
         critical point of ``curve``, the index of its ``"critical"`` frame (or None when its
         state could not be solved).
     """
-    from ..exceptions import InputError
-    from ..solver import EquilibriumSolver
+    from vjm_pin.exceptions import InputError
+    from vjm_pin.solver import EquilibriumSolver
 
     if int(n_frames) != n_frames or n_frames < 2:
         raise InputError(f"n_frames must be an integer >= 2, got {n_frames}")
@@ -373,8 +373,8 @@ def branch_frames(vm, curve, frames, solver=None):
     only if it stays on the branch (within two branch steps of that point). Frames before
     the critical point a branch leaves are not shown.
     """
-    from ..solver import EquilibriumSolver
-    from ..viewer import Branch
+    from vjm_pin.solver import EquilibriumSolver
+    from vjm_pin.viz.viewer import Branch
 
     if not curve.branches:
         return []
@@ -421,10 +421,10 @@ def branch_frames(vm, curve, frames, solver=None):
 
 def curve_animation(vm, curve, *, scale=None, n_frames: int = DEFAULT_FRAMES, solver=None):
     """Everything an animation of ``curve`` needs: ``(geometry, shown frames, scale, kw)``
-    with ``kw`` the :class:`vjm_pin.viewer.Animation` keywords (stability, forces, critical
+    with ``kw`` the :class:`vjm_pin.viz.viewer.Animation` keywords (stability, forces, critical
     frame, labels, load slider in mm, other branches) and ``kw["_frames"]`` the
     :class:`CurveFrame` list (popped by the callers)."""
-    from ..viewer import Branch, magnify
+    from vjm_pin.viz.viewer import Branch, magnify
 
     frames, crit = curve_frames(vm, curve, n_frames, solver)
     if frames[0].deflection > 0:  # the unloaded robot first
@@ -510,17 +510,17 @@ def curve_page(
     n_frames: int = DEFAULT_FRAMES,
     **options,
 ) -> CurvePage:
-    """Animated page of ``vm`` along ``curve`` (a ``vjm_pin.solver.curve.Curve``).
+    """Animated page of ``vm`` along ``curve`` (a ``vjm_pin.analysis.curve.Curve``).
 
     Frames from :func:`curve_frames` (dense around the critical points), the unloaded robot
     first; each coloured by its stability, with the force arrow and its value in N, the
     critical marker at the first critical point, a load slider in mm of deflection and, when
     the curve was traced with ``all_branches=True``, the other branches as second robots
     (red where unstable). ``scale`` magnifies the deformation
-    (:func:`vjm_pin.viewer.magnify`); None picks :func:`vjm_pin.viewer.default_scale`.
-    ``options`` go to :func:`vjm_pin.viewer.export_html` (e.g. ``camera_direction``).
+    (:func:`vjm_pin.viz.viewer.magnify`); None picks :func:`vjm_pin.viz.viewer.default_scale`.
+    ``options`` go to :func:`vjm_pin.viz.viewer.export_html` (e.g. ``camera_direction``).
     """
-    from ..viewer import export_html
+    from vjm_pin.viz.viewer import export_html
 
     geom, shown, scale, kw = curve_animation(vm, curve, scale=scale, n_frames=n_frames)
     frames = kw.pop("_frames")
@@ -565,8 +565,8 @@ def load_path(vm, load, kind: str, n: int = DEFAULT_LOAD_FRAMES, solver=None):
     Raises:
         NoEquilibrium: no equilibrium at some load factor (the message names it).
     """
-    from ..exceptions import InputError, NoEquilibrium
-    from ..solver import EquilibriumSolver
+    from vjm_pin.exceptions import InputError, NoEquilibrium
+    from vjm_pin.solver import EquilibriumSolver
 
     if kind not in ("deflection", "wrench"):
         raise InputError(f"kind must be 'deflection' or 'wrench', got {kind!r}")
@@ -600,7 +600,7 @@ def load_path(vm, load, kind: str, n: int = DEFAULT_LOAD_FRAMES, solver=None):
 
 def load_frames(vm, ts, results, scale: float | None = None, kind: str = "wrench"):
     """Animation of the equilibria ``results`` of :func:`load_path`: ``(geometry, shown
-    frames, scale, kw)`` with ``kw`` the :class:`vjm_pin.viewer.Animation` keywords; each
+    frames, scale, kw)`` with ``kw`` the :class:`vjm_pin.viz.viewer.Animation` keywords; each
     frame is labelled with its own force (N) and deflection (mm), and the page's slider is
     in N (``kind="wrench"``) or mm (``kind="deflection"``)."""
     xs = [np.asarray(r.x, float) for r in results]
@@ -645,12 +645,12 @@ def load_frames(vm, ts, results, scale: float | None = None, kind: str = "wrench
 
 # ----------------------------------------------------------------------------- command
 def run(args) -> int:
-    from ..exceptions import InputError
-    from ..outputs import HTML_EXTENSIONS
-    from ..solver import EquilibriumSolver
-    from .analyze import load_from_args
-    from .common import check_output_option, direction_vector, finite_vector
-    from .parallel_cmds import is_parallel_model
+    from vjm_pin.exceptions import InputError
+    from vjm_pin.outputs import HTML_EXTENSIONS
+    from vjm_pin.solver import EquilibriumSolver
+    from vjm_pin.cli.analyze import load_from_args
+    from vjm_pin.cli.common import check_output_option, direction_vector, finite_vector
+    from vjm_pin.cli.parallel_cmds import is_parallel_model
 
     check_output_option(args, "--html", HTML_EXTENSIONS)  # before any work
     if getattr(args, "json", False) and args.html is None:
@@ -687,7 +687,7 @@ def run(args) -> int:
         if args.steps < 2:
             raise InputError(f"--steps must be at least 2, got {args.steps}")
         direction = direction_vector(args.direction, "--direction")
-        from .common import Progress, summary
+        from vjm_pin.cli.common import Progress, summary
 
         with Progress(args, args.steps + 1, f"curve {vm.name}") as bar:
             curve = trace(
@@ -716,7 +716,7 @@ def run(args) -> int:
     geom, shown, scale, kw = load_frames(vm, ts, path, args.scale, kind)
     title = f"{vm.name}: loaded equilibrium — deformation ×{scale:g}"
     if args.html is not None:
-        from ..viewer import export_html
+        from vjm_pin.viz.viewer import export_html
 
         export_html(
             vm.model,
@@ -728,7 +728,7 @@ def run(args) -> int:
             path=args.html,
             **kw,
         )
-        from .common import summary
+        from vjm_pin.cli.common import summary
 
         verdict = "stable" if res.stable is not False else "UNSTABLE"
         summary(args, f"{vm.name}: wrote {args.html}, {len(shown)} frames, {verdict} equilibrium")
@@ -743,14 +743,14 @@ def run(args) -> int:
 
 
 def _dump_view(body: dict) -> str:
-    from .common import dump_json, envelope
+    from vjm_pin.cli.common import dump_json, envelope
 
     return dump_json(envelope("view", {k: body.get(k) for k in VIEW_KEYS}, UNIT_KEYS))
 
 
 def _curve_view_dict(vm, curve, cp, html) -> dict:
     """The ``view --curve --json`` body: the frames of the page ``cp`` (:class:`CurvePage`)."""
-    from .curve import CRITICAL_KEYS, critical_dict
+    from vjm_pin.cli.curve import CRITICAL_KEYS, critical_dict
 
     return {
         "model": vm.name,
@@ -813,7 +813,7 @@ def _maybe_open(args) -> None:
 
 
 def _serve(vm, geom, shown, scale, args, kw) -> int:
-    from ..viewer import serve
+    from vjm_pin.viz.viewer import serve
 
     url = serve(
         vm.model,

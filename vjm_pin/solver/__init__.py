@@ -7,15 +7,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..exceptions import NoEquilibrium
-from ..kinematics import Kinematics
-from ..model import VjmModel
-from .blocks import Blocks, evaluate_blocks, full_wrench
-from .curve import CriticalPoint, Curve, CurvePoint, trace_curve
-from .equilibrium import COMPONENTS, EquilibriumResult, EquilibriumSolver, solve_equilibrium, solve_for_wrench
-from .mechanism import MechanismResult, MechanismSolver
-from .stability import StabilityResult, check_stability, check_stability_held, null_space, reduced_matrix
-from .stiffness import (
+from vjm_pin.exceptions import NoEquilibrium
+from vjm_pin.kinematics.chain import Kinematics
+from vjm_pin.model.format import VjmModel
+from vjm_pin.solver.blocks import Blocks, evaluate_blocks, full_wrench
+from vjm_pin.solver.equilibrium import COMPONENTS, EquilibriumResult, EquilibriumSolver, solve_equilibrium, solve_for_wrench
+from vjm_pin.solver.mechanism import MechanismResult, MechanismSolver
+from vjm_pin.solver.stability import StabilityResult, check_stability, check_stability_held, null_space, reduced_matrix
+from vjm_pin.solver.stiffness import (
     StiffnessResult,
     eq28_matrix,
     stiffness_eq30,
@@ -23,7 +22,7 @@ from .stiffness import (
     stiffness_eq33,
     stiffness_from_blocks,
 )
-from .threads import one_blas_thread
+from vjm_pin.solver.threads import one_blas_thread
 
 
 def blocks_at(vm: VjmModel, x: np.ndarray, wrench: np.ndarray, kin: Kinematics | None = None) -> Blocks:
@@ -57,9 +56,6 @@ def unloaded_stiffness(vm: VjmModel, method: str = "eq30", kin: Kinematics | Non
 __all__ = [
     "Blocks",
     "COMPONENTS",
-    "CriticalPoint",
-    "Curve",
-    "CurvePoint",
     "EquilibriumResult",
     "EquilibriumSolver",
     "MechanismResult",
@@ -81,6 +77,5 @@ __all__ = [
     "stiffness_eq32",
     "stiffness_eq33",
     "stiffness_from_blocks",
-    "trace_curve",
     "unloaded_stiffness",
 ]

@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..kinematics import Kinematics, KinematicState
-from ..model import VjmModel
+from vjm_pin.kinematics.chain import Kinematics, KinematicState
+from vjm_pin.model.format import VjmModel
 
 
 @dataclass(frozen=True)
@@ -27,7 +27,7 @@ class Blocks:
         H_qt: (nq, nθ) ``∂(J_qᵀF)/∂θ``.
         H_qq: (nq, nq) ``∂(J_qᵀF)/∂q``.
         K_theta: (nθ, nθ) spring stiffness.
-        state: The full :class:`~vjm_pin.kinematics.KinematicState`.
+        state: The full :class:`~vjm_pin.kinematics.chain.KinematicState`.
     """
 
     J_theta: np.ndarray

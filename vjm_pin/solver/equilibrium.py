@@ -36,8 +36,8 @@ perturbed restarts (small seeded random noise on ``(q, θ)``, §4.1) when an ite
 stalls; an unstable equilibrium is left along its unstable eigenvectors first
 (:meth:`EquilibriumSolver._escape`). The result says which path was used.
 
-Every iterate's coordinates smaller than :data:`~vjm_pin.kinematics.FLUSH_BELOW` (1e-150) are
-set to exactly zero (:func:`~vjm_pin.kinematics.flush_tiny`): on a straight column they would
+Every iterate's coordinates smaller than :data:`~vjm_pin.kinematics.chain.FLUSH_BELOW` (1e-150) are
+set to exactly zero (:func:`~vjm_pin.kinematics.chain.flush_tiny`): on a straight column they would
 otherwise converge to subnormal floats, which slow Pinocchio, without changing any result. The
 public calls run with one BLAS thread (:mod:`vjm_pin.solver.threads`).
 
@@ -78,11 +78,11 @@ import pinocchio as pin
 from scipy.linalg import lapack as _lapack
 from scipy.linalg import solve_triangular as _solve_triangular
 
-from ..exceptions import EquilibriumCheckError, InputError, NoEquilibrium, SingularStiffness
-from ..kinematics import Kinematics, contract_hessian, deflection, displace, flush_tiny, pose_error
-from ..model import VjmModel
-from .blocks import Blocks, evaluate_blocks, full_wrench, remember_blocks
-from .stability import (
+from vjm_pin.exceptions import EquilibriumCheckError, InputError, NoEquilibrium, SingularStiffness
+from vjm_pin.kinematics.chain import Kinematics, contract_hessian, deflection, displace, flush_tiny, pose_error
+from vjm_pin.model.format import VjmModel
+from vjm_pin.solver.blocks import Blocks, evaluate_blocks, full_wrench, remember_blocks
+from vjm_pin.solver.stability import (
     RANK_TOL,
     SCIPY_LAPACK_MAX_N,
     STABILITY_TOL,
@@ -93,8 +93,8 @@ from .stability import (
     reduced_matrix,
     spectral_norm,
 )
-from .stiffness import stiffness_from_blocks
-from .threads import one_blas_thread
+from vjm_pin.solver.stiffness import stiffness_from_blocks
+from vjm_pin.solver.threads import one_blas_thread
 
 METHODS = ("newton", "fixed-point")
 #: A converged iterate is polished by up to this many further Newton steps while the step
@@ -809,7 +809,7 @@ class EquilibriumSolver:
         """The plain local Newton iteration alone (:meth:`_fast_newton`) from ``x0``: its
         equilibrium when it converges to an acceptable one (stable when ``follow_stable``),
         else None and the caller solves as usual. No safeguards, restarts or continuation:
-        for a predicted start (tangent predictor of :func:`~vjm_pin.solver.trace_curve`).
+        for a predicted start (tangent predictor of :func:`~vjm_pin.analysis.curve.trace_curve`).
         ``self._fast_its`` holds the iterations spent when it returns None."""
         self._fast_its = 0
         if self.method != "newton":

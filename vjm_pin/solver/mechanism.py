@@ -1,11 +1,11 @@
 """One solver for a mechanism: loop closures, held/loaded task components, dead loads anywhere
 (issue 13; paper §4–5 generalised).
 
-A mechanism is one Pinocchio tree (:class:`~vjm_pin.model.VjmModel`) with springs ``K_θ``,
-passive joints, loop closures ``c(x) = 0`` (:mod:`vjm_pin.closures`, held at the assembled
+A mechanism is one Pinocchio tree (:class:`~vjm_pin.model.format.VjmModel`) with springs ``K_θ``,
+passive joints, loop closures ``c(x) = 0`` (:mod:`vjm_pin.kinematics.closures`, held at the assembled
 reference), one task frame whose components are *held* (deflection prescribed) or *loaded*
 (dead wrench prescribed), and dead loads at any frames plus link weights
-(:mod:`vjm_pin.dead_loads`). Only the spring and passive coordinates ``z = (θ, q)`` move;
+(:mod:`vjm_pin.kinematics.dead_loads`). Only the spring and passive coordinates ``z = (θ, q)`` move;
 rigid actuated joints stay at their reference value.
 
 Equilibrium = stationary point of the total potential
@@ -24,8 +24,8 @@ One Newton iteration over all coordinates with the matrix ``[[W, −A_Iᵀ], [A_
     W = K − ∂Q_loads/∂z − H(w) − Σ_k μ_k ∂²c_k/∂z²                             (eq. 16 forms)
 
 (``H(w)`` the eq. 16 contraction of the total end wrench ``w``: dead load on loaded rows,
-reaction on held rows; the closure term is :meth:`~vjm_pin.closures.ClosureState.hessian`),
-solved in null-space form on the *independent* rows ``A_I`` (:func:`~vjm_pin.closures.constraint_rank`,
+reaction on held rows; the closure term is :meth:`~vjm_pin.kinematics.closures.ClosureState.hessian`),
+solved in null-space form on the *independent* rows ``A_I`` (:func:`~vjm_pin.kinematics.closures.constraint_rank`,
 closure rows preferred; redundant rows are dropped for the step: at an assembled configuration
 they are implied). Globalisation as the serial solver: a plain local Newton attempt first, then
 steps with the reduced Hessian shifted to be positive definite (descent towards a stable
@@ -37,7 +37,7 @@ Multipliers. On the independent rows the multipliers are unique (least squares o
 stationarity residual). With redundant rows (an over-constrained mechanism) the reactions are
 statically indeterminate; the reported multipliers are the **minimum-norm** set (Euclidean norm
 of the raw multipliers, N for translation rows and N·m for rotation rows) that carries the same
-generalised force — the choice of :func:`~vjm_pin.closures.min_norm_multipliers`; zero on rows
+generalised force — the choice of :func:`~vjm_pin.kinematics.closures.min_norm_multipliers`; zero on rows
 that are identically zero (a planar loop closed in six components). The stability verdicts and
 K_C do not depend on this choice (the Lagrangian Hessian on the constraint null space does not).
 
@@ -66,15 +66,15 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import pinocchio as pin
 
-from ..closures import RANK_RTOL, ClosureSet, constraint_rank
-from ..dead_loads import DeadLoads, Load
-from ..exceptions import InputError, NoEquilibrium, SingularStiffness
-from ..frames import FrameKinematics
-from ..kinematics import contract_hessian, deflection, displace, pose_error
-from ..model import VjmModel
-from .stability import STABILITY_TOL, StabilityResult, spectral_norm
-from .stiffness import SINGULAR_RCOND, StiffnessResult, _rcond
-from .threads import one_blas_thread
+from vjm_pin.kinematics.closures import RANK_RTOL, ClosureSet, constraint_rank
+from vjm_pin.kinematics.dead_loads import DeadLoads, Load
+from vjm_pin.exceptions import InputError, NoEquilibrium, SingularStiffness
+from vjm_pin.kinematics.frames import FrameKinematics
+from vjm_pin.kinematics.chain import contract_hessian, deflection, displace, pose_error
+from vjm_pin.model.format import VjmModel
+from vjm_pin.solver.stability import STABILITY_TOL, StabilityResult, spectral_norm
+from vjm_pin.solver.stiffness import SINGULAR_RCOND, StiffnessResult, _rcond
+from vjm_pin.solver.threads import one_blas_thread
 
 #: Names of the six task components, in order.
 COMPONENTS = ("x", "y", "z", "rx", "ry", "rz")
@@ -194,7 +194,7 @@ class _State:
 
 def _null_basis(a: np.ndarray, rtol: float) -> tuple[np.ndarray, int]:
     """Orthonormal basis of the null space of ``a`` (rows normalised first, rank as
-    :func:`~vjm_pin.closures.constraint_rank`) and the rank."""
+    :func:`~vjm_pin.kinematics.closures.constraint_rank`) and the rank."""
     n = a.shape[1]
     if a.shape[0] == 0:
         return np.eye(n), 0
@@ -219,7 +219,7 @@ class MechanismSolver:
 
     Args:
         vm: The model (its ``closures``, springs, roles and task).
-        loads: Dead loads anywhere (:class:`~vjm_pin.dead_loads.Load`, world axes).
+        loads: Dead loads anywhere (:class:`~vjm_pin.kinematics.dead_loads.Load`, world axes).
         gravity: (3,) gravity (m/s²) for the link weights, or None.
         tol: Relative tolerance (1e-15…1e-4): constraint residuals ≤ 0.01·tol·L_c (m) and
             0.01·tol (rad), statics ≤ tol × max(|K_θ(θ−θ₀)|, |loads|, 1e-6·|K_θ|).

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import lapack as _lapack
 
-from .blocks import Blocks
+from vjm_pin.solver.blocks import Blocks
 
 #: Largest matrix order for which the hot paths call scipy's LAPACK directly (numpy.linalg's
 #: wrappers cost more than small factorisations). numpy and scipy load two different OpenBLAS
@@ -125,7 +125,7 @@ def check_stability(b: Blocks, tol: float = STABILITY_TOL) -> StabilityResult:
     The virtual work (eq. 17–18) of joint displacements that keep the end fixed
     (eq. 19) is a quadratic form on the null space of ``[J_θ J_q]``; the equilibrium is
     stable iff its matrix (eq. 23) is negative definite. A moment in the wrench makes the
-    Hessian blocks non-symmetric (dead moment, see :mod:`vjm_pin.kinematics`); the
+    Hessian blocks non-symmetric (dead moment, see :mod:`vjm_pin.kinematics.chain`); the
     quadratic form only sees the symmetric part. The threshold is relative:
     ``tol · ‖K_θ‖₂``.
     """

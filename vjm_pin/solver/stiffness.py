@@ -7,9 +7,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import lapack as _lapack
 
-from ..exceptions import SingularStiffness
-from .blocks import Blocks
-from .stability import RANK_TOL, SCIPY_LAPACK_MAX_N
+from vjm_pin.exceptions import SingularStiffness
+from vjm_pin.solver.blocks import Blocks
+from vjm_pin.solver.stability import RANK_TOL, SCIPY_LAPACK_MAX_N
 
 METHODS = ("eq30", "eq32", "eq33")
 #: Reciprocal condition number below which a matrix to invert is treated as singular.

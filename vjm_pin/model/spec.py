@@ -1,13 +1,13 @@
 """The spring specification: its schema, and reading it from YAML or a dict.
 
-The keys are documented in :mod:`vjm_pin.generator` and ``docs/format.md``. The schema is
+The keys are documented in :mod:`vjm_pin.model.generator` and ``docs/format.md``. The schema is
 written as pydantic models (one declaration gives the key names, the types, the allowed
 values and the YAML path of every problem): :func:`read_spec` validates the whole
 document and raises one :class:`~vjm_pin.exceptions.SpecProblems` listing every problem as
 ``yaml.path: what is wrong`` (``links.forearm_link.beam.E: expected a number, got 'abc'``).
 
 Checks that need the URDF (joint and link names, the shape of a stiffness matrix against
-its ``dofs``, positive definiteness) stay in :func:`vjm_pin.generator.generate_vjm`.
+its ``dofs``, positive definiteness) stay in :func:`vjm_pin.model.generator.generate_vjm`.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, BeforeValidator, ConfigDict, ValidationError, model_validator
 
-from .exceptions import ArgumentError, SpecProblems
+from vjm_pin.exceptions import ArgumentError, SpecProblems
 
 COMPONENTS = ("x", "y", "z", "rx", "ry", "rz")
 SECTION_DIMS = {"rectangle": ("a", "b"), "circle": ("diameter",), "tube": ("outer_diameter", "wall")}
@@ -89,7 +89,7 @@ class _Strict(BaseModel):
 
 
 class BeamSpec(_Strict):
-    """``links.<link>.beam``: a link as a cantilever beam (:mod:`vjm_pin.beam`); SI units."""
+    """``links.<link>.beam``: a link as a cantilever beam (:mod:`vjm_pin.model.beam`); SI units."""
 
     length: Positive | None = None
     section: Literal["rectangle", "circle", "tube"]
@@ -141,7 +141,7 @@ class LinkSpec(_Strict):
 
 
 class SpringSpec(_Strict):
-    """The whole specification (keys documented in :mod:`vjm_pin.generator`)."""
+    """The whole specification (keys documented in :mod:`vjm_pin.model.generator`)."""
 
     name: Name | None = None
     frame: Name | None = None

@@ -3,10 +3,10 @@
 The mechanism core needs, at each configuration, the placement, Jacobian and kinematic
 Hessian of more frames than the end frame: both frames of every loop closure and every frame
 that carries a dead load. :class:`FrameKinematics` evaluates them in one Pinocchio pass, with
-the conventions of :mod:`vjm_pin.kinematics` (``LOCAL_WORLD_ALIGNED`` Jacobians: linear
+the conventions of :mod:`vjm_pin.kinematics.chain` (``LOCAL_WORLD_ALIGNED`` Jacobians: linear
 velocity of the frame origin and angular velocity, world axes; Hessians with
 ``hessian[k, i, j] = ∂jacobian[k, i]/∂x_j``, the pin 4.1 layout fixed by
-:func:`~vjm_pin.kinematics.fix_hessian_layout`).
+:func:`~vjm_pin.kinematics.chain.fix_hessian_layout`).
 """
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ from collections.abc import Iterable
 import numpy as np
 import pinocchio as pin
 
-from .exceptions import ArgumentError
-from .kinematics import KinematicState, _vector, fix_hessian_layout
+from vjm_pin.exceptions import ArgumentError
+from vjm_pin.kinematics.chain import KinematicState, _vector, fix_hessian_layout
 
 
 class FrameKinematics:
@@ -54,7 +54,7 @@ class FrameKinematics:
         self._last: tuple[bytes, dict[int, KinematicState]] | None = None
 
     def evaluate(self, x: np.ndarray, hessian: bool = True) -> dict[int, KinematicState]:
-        """Frame id → :class:`~vjm_pin.kinematics.KinematicState` at ``x`` (nq,) (m, rad).
+        """Frame id → :class:`~vjm_pin.kinematics.chain.KinematicState` at ``x`` (nq,) (m, rad).
 
         The returned states are shared with later calls at the same ``x``: do not modify them."""
         x = _vector(x, self.model.nq, "x", "the configuration (m, rad)")

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .exceptions import (
+from vjm_pin.exceptions import (
     ArgumentError,
     ClosureViolated,
     FrameNotFound,
@@ -268,7 +268,7 @@ class SpringGroup:
         stiffness: (k, k) SPD stiffness matrix in SI (N/m, N·m/rad, N/rad), joint coordinates.
         rest: (k,) rest values θ0 of the joints (m or rad): the preload.
         link: The link whose flexibility the spring models (None for actuator springs).
-        beam: Beam parameters it was derived from (``vjm_pin.beam.Beam.to_dict()`` keys), if any.
+        beam: Beam parameters it was derived from (``vjm_pin.model.beam.Beam.to_dict()`` keys), if any.
     """
 
     name: str

@@ -7,7 +7,7 @@ eq. (16)::
 
     Q(x) = Σ_l J_lᵀ w_l,      ∂Q/∂x = Σ_l H_l : w_l     (H:w)[i, j] = Σ_k w_k ∂J[k, i]/∂x_j
 
-with ``J_l`` the ``LOCAL_WORLD_ALIGNED`` Jacobian of frame ``l`` (:mod:`vjm_pin.kinematics`).
+with ``J_l`` the ``LOCAL_WORLD_ALIGNED`` Jacobian of frame ``l`` (:mod:`vjm_pin.kinematics.chain`).
 ``∂Q/∂x`` is symmetric when every load is a pure force (it then has the potential
 ``V = −Σ f_l·p_l(x)``) and not in general with moments (footnote 2 of the paper).
 
@@ -29,10 +29,10 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .exceptions import ArgumentError, FrameNotFound, InputError
-from .frames import FrameKinematics
-from .kinematics import contract_hessian
-from .model import VjmModel
+from vjm_pin.exceptions import ArgumentError, FrameNotFound, InputError
+from vjm_pin.kinematics.frames import FrameKinematics
+from vjm_pin.kinematics.chain import contract_hessian
+from vjm_pin.model.format import VjmModel
 
 #: Standard gravity (m/s²), ISO 80000-3 (the value of :mod:`vjm_pin.loads`).
 STANDARD_GRAVITY = 9.80665
@@ -150,10 +150,10 @@ class DeadLoads:
     """Dead wrenches at frames and link weights of a model, evaluated together.
 
     Args:
-        vm: The :class:`~vjm_pin.model.VjmModel` (or its ``pin.Model``).
+        vm: The :class:`~vjm_pin.model.format.VjmModel` (or its ``pin.Model``).
         loads: The :class:`Load` list (frames must exist: :class:`FrameNotFound`).
         gravity: (3,) gravity acceleration (m/s², world axes) for the link weights, or None.
-        frames: A :class:`~vjm_pin.frames.FrameKinematics` to share (it must evaluate
+        frames: A :class:`~vjm_pin.kinematics.frames.FrameKinematics` to share (it must evaluate
             :attr:`frame_ids`); a private one by default.
     """
 

@@ -21,7 +21,7 @@ decided by this process alone:
 The ``KeyboardInterrupt`` is then re-raised; the results reported so far stay with the
 caller.
 
-This is the orchestration layer of :mod:`vjm_pin.maps`; it knows nothing of robots.
+This is the orchestration layer of :mod:`vjm_pin.analysis.maps`; it knows nothing of robots.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ import re
 import signal
 import socket
 
-from .exceptions import InputError, SchedulerError
+from vjm_pin.exceptions import InputError, SchedulerError
 
 #: Chunks in flight per worker: enough to keep the workers busy, few enough that an
 #: interrupted run has little to cancel.

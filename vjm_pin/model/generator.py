@@ -1,7 +1,7 @@
 """Generate VJM URDF models from a rigid URDF and a spring specification.
 
 The specification (a YAML file or the same as a dict; schema and validation in
-:mod:`vjm_pin.spec`) has the keys:
+:mod:`vjm_pin.model.spec`) has the keys:
 
 ``name``
     Optional model name (default: the URDF robot name).
@@ -31,7 +31,7 @@ The specification (a YAML file or the same as a dict; schema and validation in
       ``section`` (``rectangle`` with ``a`` along the beam z axis and ``b`` along y,
       ``circle`` with ``diameter``, ``tube`` with ``outer_diameter`` and ``wall``), ``E``
       (Pa) and ``nu`` or ``G`` (Pa). The spring is the cantilever tip stiffness
-      (:mod:`vjm_pin.beam`), restricted to ``dofs`` by inverting the matching block of the
+      (:mod:`vjm_pin.model.beam`), restricted to ``dofs`` by inverting the matching block of the
       compliance (the other directions are rigid).
     - ``stiffness``: an n×n SPD matrix (n = number of dofs) in the link frame at the tip.
 
@@ -52,10 +52,10 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
-from .beam import Beam
-from .exceptions import FrameNotFound, JointNotFound, SpecError, UrdfParseError
-from .model import COMPONENTS, NS, _read_root, build_pin_model, check_stiffness_matrix
-from .spec import SPEC_KEYS, LinkSpec, read_spec  # noqa: F401 - SPEC_KEYS re-exported
+from vjm_pin.model.beam import Beam
+from vjm_pin.exceptions import FrameNotFound, JointNotFound, SpecError, UrdfParseError
+from vjm_pin.model.format import COMPONENTS, NS, _read_root, build_pin_model, check_stiffness_matrix
+from vjm_pin.model.spec import SPEC_KEYS, LinkSpec, read_spec  # noqa: F401 - SPEC_KEYS re-exported
 
 _Q = f"{{{NS}}}"
 LINK_KEYS = set(LinkSpec.model_fields)
@@ -64,7 +64,7 @@ SPRING_SUFFIX = ("tx", "ty", "tz", "rx", "ry", "rz")
 
 def load_spec(spec) -> dict:
     """Read a spec from a dict, a YAML path or YAML text and validate the whole document
-    (:func:`vjm_pin.spec.read_spec`; ``frame`` required).
+    (:func:`vjm_pin.model.spec.read_spec`; ``frame`` required).
 
     Raises:
         SpecProblems: a :class:`SpecError` listing every problem with its YAML path.
@@ -196,7 +196,7 @@ def _path_joints(root: ET.Element, frame: str) -> list[ET.Element]:
 
 def generate_vjm(rigid_urdf, spec) -> str:
     """Turn a rigid URDF (path or text) and a spring spec (dict, YAML path or text) into
-    VJM URDF text (see :mod:`vjm_pin.model` for the format).
+    VJM URDF text (see :mod:`vjm_pin.model.format` for the format).
 
     Raises:
         SpecError: unknown keys, wrong shapes, bad values.

@@ -14,7 +14,7 @@ manufacturers' catalogues is of order 1e4–1e5 N·m/rad, and identified joint s
 heavy industrial robots are of order 1e5–1e7 N·m/rad (e.g. Dumas, Caro, Garnier, Furet,
 "Joint stiffness identification of six-revolute industrial serial robots", RCIM 2011).
 Give the measured values of your robot with a spec (``actuators:`` key of the spring
-specification, see :mod:`vjm_pin.generator`).
+specification, see :mod:`vjm_pin.model.generator`).
 
 The end frame defaults to the last frame of the kinematic chain (see
 :func:`default_frame`); a tree with several branches needs an explicit frame, unless its
@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .exceptions import (
+from vjm_pin.exceptions import (
     ArgumentError,
     FrameNotFound,
     InputError,
@@ -42,7 +42,7 @@ from .exceptions import (
     SpecError,
     UrdfParseError,
 )
-from .model import VjmModel, _read_root, load_vjm
+from vjm_pin.model.format import VjmModel, _read_root, load_vjm
 
 #: Default actuator stiffness of revolute joints (N·m/rad); see the module docstring.
 DEFAULT_REVOLUTE_STIFFNESS = 1.0e5
@@ -413,7 +413,7 @@ class RobotModel:
     """A VJM model built from a rigid robot description.
 
     Attributes:
-        vm: The :class:`~vjm_pin.model.VjmModel`.
+        vm: The :class:`~vjm_pin.model.format.VjmModel`.
         source: Where it came from. spec: The spring spec used (defaults included).
         pose: The joint positions applied (rad, m). pose_name: SRDF state used, if any
             (with ``+0.3 rad (singular)`` when the default pose was moved off a singularity).
@@ -459,7 +459,7 @@ def build_robot(
         UnknownRobot, FrameNotFound, JointNotFound, InputError (pose outside the limits),
         SpecError, UrdfParseError.
     """
-    from .generator import generate_vjm, load_spec
+    from vjm_pin.model.generator import generate_vjm, load_spec
 
     _check_robot_options(source, frame, q, pose_name)
     if isinstance(source, (str, Path)) and not (
@@ -568,7 +568,7 @@ def _rigid_jacobian(text: str, frame: str, pose: dict) -> np.ndarray:
     """(6, nv) LOCAL_WORLD_ALIGNED Jacobian of ``frame`` of the rigid URDF at ``pose``."""
     import pinocchio as pin
 
-    from .model import build_pin_model
+    from vjm_pin.model.format import build_pin_model
 
     model = build_pin_model(text)
     data = model.createData()
@@ -595,7 +595,7 @@ def default_task(source, frame: str, pose: dict) -> list[str]:
     end frame; otherwise the components (greedily in the order x, y, z, rx, ry, rz) that the
     joints move independently at ``pose`` — a 3-joint leg gets x y z, a planar 2-link arm
     the two in-plane translations. The other directions are rigid and left unconstrained."""
-    from .model import COMPONENTS
+    from vjm_pin.model.format import COMPONENTS
 
     text = source if isinstance(source, str) and "<" in source else Path(source).read_text()
     jac = _rigid_jacobian(text, frame, pose)
@@ -637,8 +637,8 @@ def _nudge_if_singular(text, tree: UrdfTree, frame: str, chain: list[str], pose:
 
 def _read_spec(springs) -> dict:
     """A validated spring spec from a dict, a YAML path or YAML text (its 'frame' is
-    optional here); see :func:`vjm_pin.spec.read_spec`."""
-    from .spec import read_spec
+    optional here); see :func:`vjm_pin.model.spec.read_spec`."""
+    from vjm_pin.model.spec import read_spec
 
     return read_spec(springs, require_frame=False)
 

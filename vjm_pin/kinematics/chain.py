@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .exceptions import ArgumentError, InputError
+from vjm_pin.exceptions import ArgumentError, InputError
 
 #: Configuration coordinates smaller than this (m, rad) are set to exactly zero after every
 #: solver update (:func:`flush_tiny`). On a straight column the symmetric-mode coordinates

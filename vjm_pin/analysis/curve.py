@@ -71,11 +71,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..exceptions import InputError, NoEquilibrium, SingularStiffness
-from ..kinematics import flush_tiny
-from ..model import VjmModel
-from .equilibrium import EquilibriumResult, EquilibriumSolver
-from .stability import (
+from vjm_pin.exceptions import InputError, NoEquilibrium, SingularStiffness
+from vjm_pin.kinematics.chain import flush_tiny
+from vjm_pin.model.format import VjmModel
+from vjm_pin.solver.equilibrium import EquilibriumResult, EquilibriumSolver
+from vjm_pin.solver.stability import (
     RANK_TOL,
     STABILITY_TOL,
     check_stability_held,
@@ -83,8 +83,8 @@ from .stability import (
     reduced_matrix,
     spectral_norm,
 )
-from .stiffness import stiffness_from_blocks
-from .threads import one_blas_thread
+from vjm_pin.solver.stiffness import stiffness_from_blocks
+from vjm_pin.solver.threads import one_blas_thread
 
 #: Maximum iterations of a root or extremum search (Illinois).
 MAX_BISECTIONS = 60
@@ -225,7 +225,7 @@ def tangent_stiffness(
     ``inf`` when the end cannot move along ``d`` to first order ([J_θ J_q] does not reach
     ``d``: a straight chain of rigid links), ``nan`` when K_C is singular otherwise.
     """
-    from . import blocks_at
+    from vjm_pin.solver import blocks_at
 
     return _stiffness_along(vm, blocks_at(vm, eq.x, eq.wrench, kin), direction)[0]
 
@@ -261,7 +261,7 @@ def _complement_rows(vm, d: np.ndarray) -> np.ndarray:
 
 def _point(vm, eq: EquilibriumResult, s: float, d: np.ndarray, kin) -> CurvePoint:
     """A :class:`CurvePoint` at the equilibrium ``eq`` (other branches, not followed)."""
-    from . import blocks_at
+    from vjm_pin.solver import blocks_at
 
     b = blocks_at(vm, eq.x, eq.wrench, kin)
     k = _stiffness_along(vm, b, d)[0]
@@ -375,7 +375,7 @@ class _Tracer:
 
     # ------------------------------------------------------------------ evaluation
     def blocks(self, x, w):
-        from . import blocks_at
+        from vjm_pin.solver import blocks_at
 
         return blocks_at(self.vm, x, w, self.kin)
 
@@ -816,7 +816,7 @@ def _other_branches(
     critical point, from the pre-critical state itself (the trivial branch continued) and
     from it displaced along ± each eigenvector of the reduced matrix of eq. (23), solved
     with ``follow_stable=False`` and continued by warm starts."""
-    from . import blocks_at
+    from vjm_pin.solver import blocks_at
 
     unstable = solver._sibling(follow_stable=False)  # shares the Kinematics (pin.Data)
     branches = []
@@ -856,8 +856,8 @@ def _unloaded(vm, solver, d, kin) -> EquilibriumResult | None:
     there (straight chain of rigid links, Model A S): the force at zero deflection is then
     indeterminate and the solver's perturbed start would pick an arbitrary one; the
     unloaded state (zero wrench) is the natural start of the curve."""
-    from . import blocks_at
-    from .stability import check_stability
+    from vjm_pin.solver import blocks_at
+    from vjm_pin.solver.stability import check_stability
 
     x = np.asarray(vm.reference, float).copy()
     stat = vm.K_theta @ (x[vm.theta_idx] - vm.theta0)

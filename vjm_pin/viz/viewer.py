@@ -108,7 +108,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from .exceptions import FrameNotFound, InputError, JointNotFound, RoleError
+from vjm_pin.exceptions import FrameNotFound, InputError, JointNotFound, RoleError
 
 __all__ = [
     "CRITICAL_COLOR",
@@ -1709,7 +1709,7 @@ def export_html(
     )
     page = anim.to_html()
     if path is not None:
-        from .outputs import atomic_output
+        from vjm_pin.outputs import atomic_output
 
         with atomic_output(path, "w") as fh:  # no half page if interrupted
             fh.write(page)

@@ -1,6 +1,6 @@
 """Loop closures: residual, Jacobian and multiplier Hessian (kinematics layer).
 
-A closure (``<vjm:closure>``, :class:`~vjm_pin.model.Closure`) holds frame a on frame b.
+A closure (``<vjm:closure>``, :class:`~vjm_pin.model.format.Closure`) holds frame a on frame b.
 With the frame origins ``p_a``, ``p_b`` (m) and orientations ``R_a``, ``R_b`` in world,
 the relative placement is
 
@@ -12,7 +12,7 @@ configuration to 1e-9).
 
 Derivatives, with ``x`` the VJM coordinates (nq = nv, so ∂/∂x is the ordinary derivative),
 ``J_a = [J^v_a; J^ω_a]`` the ``LOCAL_WORLD_ALIGNED`` frame Jacobians of
-:mod:`vjm_pin.kinematics`, ``r = p_a − p_b``, ``R = R_bᵀ R_a`` and ``J_log = Jlog3(R)``
+:mod:`vjm_pin.kinematics.chain`, ``r = p_a − p_b``, ``R = R_bᵀ R_a`` and ``J_log = Jlog3(R)``
 (Pinocchio's right-Jacobian inverse: ``δlog3(R) = J_log ω_local``; :func:`jlog3`)::
 
     ∂s_p/∂x = R_bᵀ (J^v_a − J^v_b + [r]× J^ω_b)
@@ -52,10 +52,10 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .exceptions import ArgumentError, InputError
-from .frames import FrameKinematics
-from .kinematics import KinematicState, contract_hessian
-from .model import COMPONENTS, Closure, VjmModel, relative_placement
+from vjm_pin.exceptions import ArgumentError, InputError
+from vjm_pin.kinematics.frames import FrameKinematics
+from vjm_pin.kinematics.chain import KinematicState, contract_hessian
+from vjm_pin.model.format import COMPONENTS, Closure, VjmModel, relative_placement
 
 #: Default relative tolerance of :func:`constraint_rank` and :func:`min_norm_multipliers`.
 RANK_RTOL = 1e-10
@@ -114,8 +114,8 @@ class ClosureFrames:
     """One closure evaluated at a configuration (the pieces its Hessian needs).
 
     Attributes:
-        closure: The :class:`~vjm_pin.model.Closure`.
-        a, b: :class:`~vjm_pin.kinematics.KinematicState` of frame_a and frame_b.
+        closure: The :class:`~vjm_pin.model.format.Closure`.
+        a, b: :class:`~vjm_pin.kinematics.chain.KinematicState` of frame_a and frame_b.
         placement: (6,) full relative placement ``s`` (m, rad; frame b's axes).
         jacobian: (6, nv) ``∂s/∂x`` (all six components).
         jlog: (3, 3) ``Jlog3(R_bᵀ R_a)``.
@@ -237,10 +237,10 @@ class ClosureSet:
     """The closures of a model, evaluated together.
 
     Args:
-        vm: The :class:`~vjm_pin.model.VjmModel` (its ``closures``), or a ``pin.Model``
+        vm: The :class:`~vjm_pin.model.format.VjmModel` (its ``closures``), or a ``pin.Model``
             with ``closures`` given.
         closures: Override or supply the closures (default: ``vm.closures``).
-        frames: A :class:`~vjm_pin.frames.FrameKinematics` to share with other users (it
+        frames: A :class:`~vjm_pin.kinematics.frames.FrameKinematics` to share with other users (it
             must include :attr:`frame_ids`); a private one by default.
     """
 
@@ -256,7 +256,7 @@ class ClosureSet:
             if not isinstance(vm, VjmModel):
                 raise ArgumentError("closures must be given with a pinocchio.Model")
             closures = vm.closures
-        from .exceptions import FrameNotFound
+        from vjm_pin.exceptions import FrameNotFound
 
         names = [f.name for f in model.frames]
         pairs = []

@@ -29,7 +29,7 @@ def plot_curve(
     legend: bool = True,
     analytic: Sequence[tuple[str, np.ndarray, np.ndarray]] = (),
 ):
-    """Draw a :class:`~vjm_pin.solver.Curve` on ``ax`` (a new figure if None); returns ``ax``.
+    """Draw a :class:`~vjm_pin.analysis.curve.Curve` on ``ax`` (a new figure if None); returns ``ax``.
 
     Stable points are drawn solid, unstable ones (and the ``branches``) dashed; critical
     points are marked with a star and annotated with their force. Forces are divided by
@@ -144,7 +144,7 @@ def save_curve_plot(curve, path, *, title: str | None = None, **kwargs) -> None:
         OutputError: the path cannot be written (unknown extension, missing or read-only
             folder).
     """
-    from .outputs import PLOT_EXTENSIONS, atomic_output, check_output
+    from vjm_pin.outputs import PLOT_EXTENSIONS, atomic_output, check_output
 
     path = check_output(path, PLOT_EXTENSIONS, what="plot")
     import matplotlib

@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import math
 
-from .exceptions import ArgumentError
-from .generator import generate_vjm
+from vjm_pin.exceptions import ArgumentError
+from vjm_pin.model.generator import generate_vjm
 
 POSTURES = {"s": (0.0, 0.0), "pi": (-30.0, -30.0), "z": (30.0, -30.0)}
 

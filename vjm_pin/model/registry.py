@@ -5,8 +5,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from .exceptions import ArgumentError, ModelError
-from .model import VjmModel, load_vjm
+from vjm_pin.exceptions import ArgumentError, ModelError
+from vjm_pin.model.format import VjmModel, load_vjm
 
 
 def models_dir() -> Path:
@@ -19,10 +19,10 @@ def models_dir() -> Path:
     env = os.environ.get("VJM_PIN_MODELS")
     if env:
         return Path(env)
-    packaged = Path(__file__).resolve().parent / "data"
+    packaged = Path(__file__).resolve().parents[1] / "data"
     if any(packaged.glob("*.urdf")):
         return packaged
-    return Path(__file__).resolve().parent.parent / "models" / "urdf"
+    return Path(__file__).resolve().parents[2] / "models" / "urdf"
 
 
 def bundled_models() -> dict[str, Path]:
@@ -33,7 +33,7 @@ def bundled_models() -> dict[str, Path]:
 
 def is_vjm_urdf(path: Path) -> bool:
     """Whether the file at ``path`` carries VJM tags (namespace ``urn:vjm-pin:1``)."""
-    from .model import NS
+    from vjm_pin.model.format import NS
 
     try:
         return NS in Path(path).read_text()
@@ -47,7 +47,7 @@ def resolve(name_or_path: str, *, frame=None, q=None, pose_name=None, springs=No
     """Load a model from a VJM URDF, a bundled model name, a plain (rigid) URDF or the name of
     an ``example-robot-data`` robot.
 
-    Rigid URDFs and robots get the defaults of :mod:`vjm_pin.robots` (actuator springs,
+    Rigid URDFs and robots get the defaults of :mod:`vjm_pin.model.robots` (actuator springs,
     rigid links), optionally the spring spec ``springs``, the end ``frame``, the named SRDF
     pose ``pose_name`` and the joint positions ``q`` ({name: rad or m}). For a VJM URDF or a
     bundled model only ``q`` applies (:meth:`VjmModel.with_positions`).
@@ -56,14 +56,14 @@ def resolve(name_or_path: str, *, frame=None, q=None, pose_name=None, springs=No
     with :class:`~vjm_pin.solver.MechanismSolver`; the serial solver would ignore the closures).
 
     Returns:
-        (vm, robot): the :class:`VjmModel`, and the :class:`~vjm_pin.robots.RobotModel` it was
+        (vm, robot): the :class:`VjmModel`, and the :class:`~vjm_pin.model.robots.RobotModel` it was
         built from (None for VJM URDFs and bundled models).
 
     Raises:
         ModelError: a missing file, or options a VJM model cannot take.
         UnknownRobot: neither a file, a bundled model nor a robot (lists the names).
     """
-    from .robots import UnknownRobot, build_robot, robot_names
+    from vjm_pin.model.robots import UnknownRobot, build_robot, robot_names
 
     if not isinstance(name_or_path, (str, Path)) or not str(name_or_path).strip():
         raise ArgumentError(

@@ -14,7 +14,7 @@ Indices at each pose (the end wrench ``F`` of eq. 11 and, optionally, link loads
                       ``1 / (f̂ᵀ C_tt f̂)`` with ``C = K_C⁻¹`` the loaded compliance (eq. 30);
                       rotations are free, so it is the stiffness the force really meets.
 ``k_min``             weakest translational stiffness, the end free to rotate (N/m):
-                      ``1 / λ_max(sym C_tt)`` (:func:`vjm_pin.indices.weakest_translation`;
+                      ``1 / λ_max(sym C_tt)`` (:func:`vjm_pin.analysis.indices.weakest_translation`;
                       0 where K_C is singular along a translation).
 ``stable``            verdict of eq. (23) at the loaded equilibrium.
 ``status``            ``ok``, ``singular`` (no finite stiffness there, e.g. a singular pose)
@@ -32,8 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .exceptions import InputError
-from .model import VjmModel
+from vjm_pin.exceptions import InputError
+from vjm_pin.model.format import VjmModel
 
 STATUS = ("ok", "singular", "no-equilibrium")
 BACKENDS = ("serial", "local", "dask")
@@ -154,7 +154,7 @@ def grid_poses(vm: VjmModel, grid: dict) -> tuple[list[str], np.ndarray]:
             is its rest value). InputError: an empty grid, values outside the joint's
             URDF limits, or more than :data:`MAX_POSES` poses.
     """
-    from .exceptions import RoleError
+    from vjm_pin.exceptions import RoleError
 
     if not grid:
         raise InputError("--grid: no joint given (NAME=LO:HI:N ...)")
@@ -189,7 +189,7 @@ _KIN_CACHE: dict = {}
 
 
 def _shared_kinematics(model, frame_id: int):
-    from .kinematics import Kinematics
+    from vjm_pin.kinematics.chain import Kinematics
 
     key = (id(model), int(frame_id))
     hit = _KIN_CACHE.get(key)
@@ -205,7 +205,7 @@ def _model_from_text(text: str) -> VjmModel:
     key = hash(text)
     vm = _MODEL_CACHE.get(key)
     if vm is None or vm.urdf != text:
-        from .model import load_vjm
+        from vjm_pin.model.format import load_vjm
 
         vm = load_vjm(text)
         _MODEL_CACHE.clear()
@@ -217,15 +217,15 @@ def evaluate_pose(vm: VjmModel, names, values, wrench, gravity=None, method: str
     """Deflection and stiffness indices of ``vm`` at the pose ``names = values`` under the
     end ``wrench`` (6,) and, if ``gravity`` (3,) is given, the link weights. Never raises
     for a pose that cannot be analysed: ``status`` says why."""
-    from .solver.threads import single_blas_thread
+    from vjm_pin.solver.threads import single_blas_thread
 
     with single_blas_thread():  # one BLAS thread inside (vjm_pin.solver.threads)
         return _evaluate_pose(vm, names, values, wrench, gravity, method)
 
 
 def _evaluate_pose(vm: VjmModel, names, values, wrench, gravity, method) -> dict:
-    from .exceptions import NoEquilibrium, SingularStiffness
-    from .solver import EquilibriumSolver, loaded_stiffness
+    from vjm_pin.exceptions import NoEquilibrium, SingularStiffness
+    from vjm_pin.solver import EquilibriumSolver, loaded_stiffness
 
     v = vm.with_positions(dict(zip(names, (float(x) for x in values))))
     kin = _shared_kinematics(v.model, v.frame_id)
@@ -241,7 +241,7 @@ def _evaluate_pose(vm: VjmModel, names, values, wrench, gravity, method) -> dict
     w = np.asarray(wrench, float)
     try:
         if v.n_q == 0:  # springs and motors only: Newton on eq. (5') (vjm_pin.loads)
-            from .loads import LinkLoads, solve_loaded
+            from vjm_pin.loads import LinkLoads, solve_loaded
 
             loads = None if gravity is None else LinkLoads(np.asarray(gravity, float))
             eq = solve_loaded(v, w, loads, method=method, kin=kin)
@@ -249,7 +249,7 @@ def _evaluate_pose(vm: VjmModel, names, values, wrench, gravity, method) -> dict
                 raise SingularStiffness("singular loaded stiffness")
             k, defl, stable = eq.stiffness.stiffness, eq.deflection, eq.stable
         elif gravity is not None and np.any(np.asarray(gravity) != 0):
-            from .loads import LoadError
+            from vjm_pin.loads import LoadError
 
             raise LoadError(
                 f"model '{v.name}' has passive joints: gravity maps need spring and motor joints only"
@@ -286,15 +286,15 @@ def stiffness_indices(k6: np.ndarray, wrench: np.ndarray, task) -> tuple[float, 
     if nf > 0 and c is not None:
         fh = f / nf
         k_along = float(1.0 / (fh @ c[np.ix_(tt, tt)] @ fh))
-    from .indices import weakest_translation
+    from vjm_pin.analysis.indices import weakest_translation
 
     return k_along, weakest_translation(kt, t).stiffness
 
 
 def _chunk_worker(text, names, wrench, gravity, method, chunk):
     """Evaluate a chunk of poses (runs in a worker process)."""
-    from .exceptions import VjmError
-    from .solver.threads import single_blas_thread
+    from vjm_pin.exceptions import VjmError
+    from vjm_pin.solver.threads import single_blas_thread
 
     vm = _model_from_text(text)
     try:
@@ -355,7 +355,7 @@ class MapResult:
     def to_csv(self, path) -> None:
         """Write the columns of :meth:`columns` as CSV, atomically (a temporary file renamed
         over ``path``: an interrupted write leaves no half file)."""
-        from .outputs import atomic_output
+        from vjm_pin.outputs import atomic_output
 
         cols = self.columns()
         with atomic_output(path, "w") as fh:
@@ -367,7 +367,7 @@ class MapResult:
     def to_npz(self, path) -> None:
         """Write the arrays to a NumPy ``.npz`` archive at ``path`` (exactly that name),
         atomically."""
-        from .outputs import atomic_output
+        from vjm_pin.outputs import atomic_output
 
         with atomic_output(path, "wb") as fh:
             np.savez(
@@ -405,7 +405,7 @@ class MapResult:
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
-        from .outputs import atomic_output
+        from vjm_pin.outputs import atomic_output
 
         ok = self.ok
         d = np.linalg.norm(self.deflection[:, :3], axis=1) * 1e3
@@ -477,10 +477,10 @@ def run_map(
     Raises:
         InputError: bad poses, wrench, backend, workers or chunk. SchedulerError (an
             InputError): no Dask scheduler at ``scheduler``. MapInterrupted: Ctrl-C; it carries the
-            poses finished so far (:mod:`vjm_pin.map_backends` stops the workers first).
+            poses finished so far (:mod:`vjm_pin.analysis.map_backends` stops the workers first).
     """
-    from .exceptions import MapInterrupted, RoleError
-    from .map_backends import run_chunks
+    from vjm_pin.exceptions import MapInterrupted, RoleError
+    from vjm_pin.analysis.map_backends import run_chunks
 
     if backend not in BACKENDS:
         raise InputError(f"unknown backend '{backend}'; choose one of {BACKENDS}")
@@ -502,7 +502,7 @@ def run_map(
         if vm.roles[n] == "spring":
             raise RoleError(f"joint '{n}' is a virtual spring joint; a map cannot set its position")
     if gravity is not None and vm.n_q:
-        from .loads import LoadError
+        from vjm_pin.loads import LoadError
 
         raise LoadError(
             f"model '{vm.name}' has passive joints {vm.q_names}: gravity maps need spring and motor joints only"

@@ -2,7 +2,7 @@
 
 A link spring derived from beam parameters (a ``<vjm:beam>`` element inside its
 ``<vjm:spring>``) lumps the whole flexibility of the link into one tip spring (the
-cantilever tip stiffness, :mod:`vjm_pin.beam`). :func:`subdivide_vjm` splits each such
+cantilever tip stiffness, :mod:`vjm_pin.model.beam`). :func:`subdivide_vjm` splits each such
 link into ``k`` sub-links of length L/k along the original tip vector, each ending in its
 own spring: the tip stiffness of a beam of length L/k, restricted to the same degrees of
 freedom. As k grows the VJM chain converges to the continuous beam (e.g. Euler's column
@@ -18,9 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .exceptions import ModelError, SpecError
-from .generator import SPRING_SUFFIX, link_spring_matrix
-from .model import COMPONENTS, NS, _read_root, load_vjm
+from vjm_pin.exceptions import ModelError, SpecError
+from vjm_pin.model.generator import SPRING_SUFFIX, link_spring_matrix
+from vjm_pin.model.format import COMPONENTS, NS, _read_root, load_vjm
 
 _Q = f"{{{NS}}}"
 
@@ -167,5 +167,5 @@ def subdivide_vjm(source: str | Path, k: int) -> str:
 
 
 def subdivide_model(vm_source: str | Path, k: int):
-    """:func:`subdivide_vjm` then :func:`~vjm_pin.model.load_vjm`."""
+    """:func:`subdivide_vjm` then :func:`~vjm_pin.model.format.load_vjm`."""
     return load_vjm(subdivide_vjm(vm_source, k))

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .exceptions import SpecError
+from vjm_pin.exceptions import SpecError
 
 SECTIONS = ("rectangle", "circle", "tube")
 

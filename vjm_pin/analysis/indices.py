@@ -14,7 +14,7 @@ smallest eigenvalue of the translational block of ``K_C`` itself (the index vjm_
 reported) is the stiffness with the end's rotations *held*; freeing them can only soften
 (Schur complement), e.g. 124 N/mm instead of 247 N/mm for the default ur5.
 
-Non-symmetric K_C. A dead moment makes K_C non-symmetric (see :mod:`vjm_pin.kinematics`).
+Non-symmetric K_C. A dead moment makes K_C non-symmetric (see :mod:`vjm_pin.kinematics.chain`).
 Only the component of the displacement along the force does work with it, so only the
 symmetric part of ``C_tt`` enters ``k(û)``; the displacement ``C_tt û`` itself need not be
 parallel to ``û``.
@@ -31,7 +31,7 @@ Edge cases, never a silent wrong number:
   it (``kind = "free"``).
 - A singular pose (:func:`lost_directions`): the joints cannot move the end along some
   direction to first order there, so that direction is missing from the task (a model
-  built at that pose, e.g. ``vjm_pin.robots.default_task``) and K_C has no stiffness for
+  built at that pose, e.g. ``vjm_pin.model.robots.default_task``) and K_C has no stiffness for
   it: its zero row is *not* a zero stiffness. The caller passes those directions in
   ``lost`` so that they are reported with the index.
 """
@@ -42,8 +42,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .exceptions import InputError
-from .model import COMPONENTS, VjmModel
+from vjm_pin.exceptions import InputError
+from vjm_pin.model.format import COMPONENTS, VjmModel
 
 #: Relative tolerance (on the equilibrated matrix) below which a singular value of K_C
 #: counts as zero.
@@ -254,7 +254,7 @@ def lost_directions(
     A lost direction inside the task makes the matrix of eq. (28) singular, which the
     stiffness code reports (:class:`~vjm_pin.exceptions.SingularStiffness`) when it is still
     singular at the equilibrium; one the task leaves out (a model built at that pose drops it,
-    ``vjm_pin.robots.default_task``) leaves a zero row in K_C that is not a zero stiffness.
+    ``vjm_pin.model.robots.default_task``) leaves a zero row in K_C that is not a zero stiffness.
     With ``outside_task`` (default) only the latter are returned: those with a part outside
     the task components.
 
@@ -268,14 +268,14 @@ def lost_directions(
         vm: The model. x: (nq,) configuration (default the unloaded reference pose).
         outside_task: Return only the lost directions with a component outside ``vm.task``.
         seed: Seed of the perturbation.
-        kin: A :class:`~vjm_pin.kinematics.Kinematics` of ``vm`` to reuse (creating one
+        kin: A :class:`~vjm_pin.kinematics.chain.Kinematics` of ``vm`` to reuse (creating one
             costs seconds for finely subdivided models).
 
     Returns:
         Unit 6-vectors over ``(x, y, z, rx, ry, rz)`` (m and rad mixed, as in the Jacobian);
         name them with ``name_direction(v, COMPONENTS)``.
     """
-    from .kinematics import Kinematics
+    from vjm_pin.kinematics.chain import Kinematics
 
     if outside_task and len(vm.task) == 6:
         return ()  # nothing is outside the task
