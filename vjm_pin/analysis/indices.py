@@ -137,6 +137,45 @@ def _scaling(k: np.ndarray) -> np.ndarray:
     return 1.0 / np.sqrt(r)
 
 
+def _task_matrix(K_C_task, task):
+    """``(task, K, translational rows)`` checked: (m, m), finite, at least one translation."""
+    task = [int(c) for c in task]
+    k = np.asarray(K_C_task, dtype=float)
+    m = len(task)
+    if k.shape != (m, m):
+        raise InputError(
+            f"K_C on the task must be ({m}, {m}) for task {[COMPONENTS[c] for c in task]}, got {k.shape}"
+        )
+    if not np.all(np.isfinite(k)):
+        raise InputError("K_C contains NaN or infinite values")
+    tt = [i for i, c in enumerate(task) if c < 3]
+    if not tt:
+        raise InputError(f"task {[COMPONENTS[c] for c in task]} has no translational component")
+    return task, k, tt
+
+
+def _singular_directions(k: np.ndarray, tt):
+    """Scaling ``d``, scaled ``S = diag(d) K diag(d)``, the right null directions of ``K``
+    (motion without force) and the translational parts of the right and left ones (a force
+    with no equilibrium), each relative to the size of its direction."""
+    d = _scaling(k)
+    s = k * np.multiply.outer(d, d)
+    u, sv, vt = np.linalg.svd(s)
+    smax = sv.max() if sv.size else 0.0
+    null = sv <= SINGULAR_TOL * max(smax, 1e-300)
+    if smax == 0.0:
+        null[:] = True
+    right = d[:, None] * vt[null].T  # K v = 0  <=>  S (v / d) = 0
+    left = d[:, None] * u[:, null]  # wᵀ K = 0
+    trans = []
+    for a in (right, left):
+        for v in a.T:
+            vn = v / np.linalg.norm(v)
+            if np.linalg.norm(vn[tt]) > 1e-8:
+                trans.append(vn[tt])
+    return d, s, right, trans
+
+
 def weakest_translation(K_C_task: np.ndarray, task, lost=()) -> WeakestDirection:
     """Weakest translational stiffness of the end, free in all other task components.
 
@@ -154,32 +193,12 @@ def weakest_translation(K_C_task: np.ndarray, task, lost=()) -> WeakestDirection
         InputError: a matrix of the wrong shape or with NaN/inf, a task without a
             translational component.
     """
-    task = [int(c) for c in task]
-    k = np.asarray(K_C_task, dtype=float)
-    m = len(task)
-    if k.shape != (m, m):
-        raise InputError(
-            f"K_C on the task must be ({m}, {m}) for task {[COMPONENTS[c] for c in task]}, got {k.shape}"
-        )
-    if not np.all(np.isfinite(k)):
-        raise InputError("K_C contains NaN or infinite values")
-    tt = [i for i, c in enumerate(task) if c < 3]
-    if not tt:
-        raise InputError(f"task {[COMPONENTS[c] for c in task]} has no translational component")
+    task, k, tt = _task_matrix(K_C_task, task)
     names = [COMPONENTS[c] for c in task]
     comps = tuple(names[i] for i in tt)
     blk = k[np.ix_(tt, tt)]
     held = float(np.linalg.eigvalsh(0.5 * (blk + blk.T))[0])
-
-    d = _scaling(k)
-    s = k * np.multiply.outer(d, d)
-    u, sv, vt = np.linalg.svd(s)
-    smax = sv.max() if sv.size else 0.0
-    null = sv <= SINGULAR_TOL * max(smax, 1e-300)
-    if smax == 0.0:
-        null[:] = True
-    right = d[:, None] * vt[null].T  # K v = 0  <=>  S (v / d) = 0
-    left = d[:, None] * u[:, null]  # wᵀ K = 0
+    d, s, right, trans = _singular_directions(k, tt)
     free = tuple(name_direction(v, names) for v in right.T)
 
     def world(vec):
@@ -189,14 +208,6 @@ def weakest_translation(K_C_task: np.ndarray, task, lost=()) -> WeakestDirection
             out = -out
         return out / np.linalg.norm(out)
 
-    # translational parts of the singular directions (right: motion without force; left: a
-    # force with no equilibrium) — relative to the size of each direction
-    trans = []
-    for a in (right, left):
-        for v in a.T:
-            vn = v / np.linalg.norm(v)
-            if np.linalg.norm(vn[tt]) > 1e-8:
-                trans.append(vn[tt])
     lost = tuple(str(x) for x in lost)
     if trans:
         w = np.linalg.svd(np.array(trans).T)[0][:, 0]

@@ -52,8 +52,8 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
-from vjm_pin.model.beam import Beam
 from vjm_pin.exceptions import FrameNotFound, JointNotFound, SpecError, UrdfParseError
+from vjm_pin.model.beam import Beam
 from vjm_pin.model.format import COMPONENTS, NS, _read_root, build_pin_model, check_stiffness_matrix
 from vjm_pin.model.spec import SPEC_KEYS, LinkSpec, read_spec  # noqa: F401 - SPEC_KEYS re-exported
 
@@ -220,7 +220,36 @@ def generate_vjm(rigid_urdf, spec) -> str:
     task = _components(spec.get("task", list(COMPONENTS)), "spec 'task'")
     if "name" in spec:
         root.set("name", str(spec["name"]))
+    passive, actuators, default_k, positions, subdivide = _check_roles(spec, joints, movable)
+    _one_dof_joints(joints)
 
+    tags: list[ET.Element] = [ET.Element(f"{_Q}task", frame=frame, components=" ".join(task))]
+    for n in movable:
+        tags.append(_role_tag(n, passive, actuators, default_k, positions))
+
+    path_links = {j.find("parent").get("link"): j for j in _path_joints(root, frame)}
+    link_specs = spec.get("links") or {}
+    if not isinstance(link_specs, dict):
+        raise SpecError("spec 'links' must be a mapping link -> spring")
+    for link, entry in link_specs.items():
+        if link not in links:
+            raise FrameNotFound(link, links, "spec 'links'")
+        if link not in path_links:
+            raise SpecError(
+                f"link '{link}' has no child joint on the path to frame '{frame}', so its tip is not defined"
+            )
+        if not isinstance(entry, dict):
+            raise SpecError(f"link '{link}': expected a mapping with 'beam' or 'stiffness'")
+        tags += _insert_link_spring(root, joints, links, link, entry, path_links[link], subdivide)
+
+    for t in tags:
+        root.append(t)
+    ET.indent(root, space="  ")
+    return ET.tostring(root, encoding="unicode") + "\n"
+
+
+def _check_roles(spec: dict, joints: dict, movable: list):
+    """The spec's passive joints, actuator stiffnesses, positions and subdivision, checked."""
     passive = list(spec.get("passive") or [])
     for n in passive:
         if n not in joints:
@@ -243,8 +272,11 @@ def generate_vjm(rigid_urdf, spec) -> str:
     subdivide = spec.get("subdivide", 1)
     if not isinstance(subdivide, int) or subdivide < 1:
         raise SpecError(f"spec 'subdivide' must be a positive integer, got {subdivide!r}")
+    return passive, actuators, default_k, positions, subdivide
 
-    # joint types: continuous -> revolute; floating/planar unsupported
+
+def _one_dof_joints(joints: dict) -> None:
+    """Continuous joints become revolute (wide limits); floating/planar are refused."""
     for n, j in joints.items():
         t = j.get("type")
         if t == "continuous":
@@ -260,91 +292,97 @@ def generate_vjm(rigid_urdf, spec) -> str:
                 "free-flyer in Pinocchio, which the VJM coordinates cannot use)"
             )
 
-    tags: list[ET.Element] = [ET.Element(f"{_Q}task", frame=frame, components=" ".join(task))]
-    for n in movable:
-        attrs = {"name": n}
-        if n in passive:
-            attrs["role"] = "passive"
-        else:
-            attrs["role"] = "actuated"
-            k = actuators.get(n, default_k)
-            if k is not None:
-                try:
-                    kf = float(k)
-                except (TypeError, ValueError):
-                    raise SpecError(f"actuator stiffness of '{n}' must be a number, got {k!r}") from None
-                if not math.isfinite(kf) or kf <= 0:
-                    raise SpecError(f"actuator stiffness of '{n}' must be positive, got {k!r}")
-                attrs["stiffness"] = _fmt(kf)
-        attrs["position"] = _fmt(positions.get(n, 0.0))
-        tags.append(ET.Element(f"{_Q}joint", attrs))
 
-    path = _path_joints(root, frame)
-    path_links = {j.find("parent").get("link"): j for j in path}
-    link_specs = spec.get("links") or {}
-    if not isinstance(link_specs, dict):
-        raise SpecError("spec 'links' must be a mapping link -> spring")
-    for link, entry in link_specs.items():
-        if link not in links:
-            raise FrameNotFound(link, links, "spec 'links'")
-        if link not in path_links:
-            raise SpecError(
-                f"link '{link}' has no child joint on the path to frame '{frame}', so its tip is not defined"
+def _role_tag(n: str, passive, actuators: dict, default_k, positions: dict) -> ET.Element:
+    """The ``<vjm:joint>`` tag of movable joint ``n`` (passive, or actuated with its stiffness)."""
+    attrs = {"name": n}
+    if n in passive:
+        attrs["role"] = "passive"
+    else:
+        attrs["role"] = "actuated"
+        k = actuators.get(n, default_k)
+        if k is not None:
+            try:
+                kf = float(k)
+            except (TypeError, ValueError):
+                raise SpecError(f"actuator stiffness of '{n}' must be a number, got {k!r}") from None
+            if not math.isfinite(kf) or kf <= 0:
+                raise SpecError(f"actuator stiffness of '{n}' must be positive, got {k!r}")
+            attrs["stiffness"] = _fmt(kf)
+    attrs["position"] = _fmt(positions.get(n, 0.0))
+    return ET.Element(f"{_Q}joint", attrs)
+
+
+def _insert_link_spring(root, joints: dict, links: list, link: str, entry: dict, child, subdivide: int):
+    """Insert the spring joints of ``link`` (``subdivide`` sub-links for a beam) between the
+    link and its child joint on the path; return the ``vjm:`` tags to append."""
+    tags: list[ET.Element] = []
+    xyz, rpy = _origin(child)
+    k_sub = subdivide if "beam" in entry else 1
+    full_len = None
+    if "beam" in entry and isinstance(entry["beam"], dict) and "length" in entry["beam"]:
+        full_len = float(entry["beam"]["length"])
+    sub_entry = dict(entry)
+    if k_sub > 1:
+        b = dict(entry["beam"])
+        b["length"] = (full_len if full_len is not None else float(np.linalg.norm(xyz))) / k_sub
+        sub_entry["beam"] = b
+    k_mat, dofs, rest, beam_dict = link_spring_matrix(sub_entry, link, xyz)
+    names = [link if k_sub == 1 else f"{link}_s{s + 1}" for s in range(k_sub)]
+    elems, tags, parent = spring_chain(
+        names, link, link, dofs, xyz / k_sub, k_mat, rest, beam_dict, k_sub, joints, links, SpecError
+    )
+    for el in elems:
+        root.append(el)
+    child.find("parent").set("link", parent)
+    _set_origin(child, np.zeros(3), rpy)
+    return tags
+
+
+def spring_chain(names, link: str, parent: str, dofs, tip, k_mat, rest, beam_dict, k_sub, joints, links, error):
+    """URDF elements of the spring sub-links ``names`` of ``link`` in series from ``parent``:
+    per sub-link one prismatic/revolute joint per spring dof (the first carrying the offset
+    ``tip`` of one sub-link) and a ``<vjm:spring>`` tag with ``k_mat``/``rest`` (and the beam
+    parameters when given). Used by the generator and by subdivision.
+
+    Returns:
+        ``(link and joint elements, vjm tags, last frame)``.
+
+    Raises:
+        ``error``: a generated name clashes with a joint or link of the URDF.
+    """
+    elems: list[ET.Element] = []
+    tags: list[ET.Element] = []
+    for sname in names:
+        jnames = []
+        for d_i, dof in enumerate(dofs):
+            c = COMPONENTS.index(dof)
+            jn = f"{sname}_vjm_{SPRING_SUFFIX[c]}"
+            cn = f"{jn}_frame"
+            if jn in joints or cn in links:
+                raise error(f"generated name '{jn}' clashes with an element of the URDF")
+            axis = np.zeros(3)
+            axis[c % 3] = 1.0
+            je = ET.Element("joint", name=jn, type="prismatic" if c < 3 else "revolute")
+            ET.SubElement(je, "parent", link=parent)
+            ET.SubElement(je, "child", link=cn)
+            ET.SubElement(je, "origin", xyz=_fmt_vec(tip if d_i == 0 else np.zeros(3)), rpy="0 0 0")
+            ET.SubElement(je, "axis", xyz=_fmt_vec(axis))
+            ET.SubElement(je, "limit", lower=_fmt(-1e3), upper=_fmt(1e3), effort="0", velocity="0")
+            elems += [ET.Element("link", name=cn), je]
+            tags.append(ET.Element(f"{_Q}joint", name=jn, role="spring"))
+            jnames.append(jn)
+            parent = cn
+        sp = ET.Element(f"{_Q}spring", name=sname, link=link, joints=" ".join(jnames))
+        ET.SubElement(sp, f"{_Q}stiffness").text = _fmt_vec(k_mat)
+        ET.SubElement(sp, f"{_Q}rest").text = _fmt_vec(rest)
+        if beam_dict is not None:
+            ET.SubElement(
+                sp,
+                f"{_Q}beam",
+                {k: (v if k == "section" else _fmt(v)) for k, v in beam_dict.items()},
+                dofs=" ".join(dofs),
+                subdivide=str(k_sub),
             )
-        if not isinstance(entry, dict):
-            raise SpecError(f"link '{link}': expected a mapping with 'beam' or 'stiffness'")
-        child = path_links[link]
-        xyz, rpy = _origin(child)
-        k_sub = subdivide if "beam" in entry else 1
-        full_len = None
-        if "beam" in entry and isinstance(entry["beam"], dict) and "length" in entry["beam"]:
-            full_len = float(entry["beam"]["length"])
-        sub_entry = dict(entry)
-        if k_sub > 1:
-            b = dict(entry["beam"])
-            b["length"] = (full_len if full_len is not None else float(np.linalg.norm(xyz))) / k_sub
-            sub_entry["beam"] = b
-        k_mat, dofs, rest, beam_dict = link_spring_matrix(sub_entry, link, xyz)
-        parent = link
-        for s in range(k_sub):
-            sname = link if k_sub == 1 else f"{link}_s{s + 1}"
-            jnames = []
-            for d_i, dof in enumerate(dofs):
-                jn = f"{sname}_vjm_{SPRING_SUFFIX[COMPONENTS.index(dof)]}"
-                cn = f"{jn}_frame"
-                if jn in joints or cn in links:
-                    raise SpecError(f"generated name '{jn}' clashes with a URDF element")
-                axis = np.zeros(3)
-                axis[COMPONENTS.index(dof) % 3] = 1.0
-                jt = "prismatic" if COMPONENTS.index(dof) < 3 else "revolute"
-                je = ET.Element("joint", name=jn, type=jt)
-                ET.SubElement(je, "parent", link=parent)
-                ET.SubElement(je, "child", link=cn)
-                off = xyz / k_sub if d_i == 0 else np.zeros(3)
-                ET.SubElement(je, "origin", xyz=_fmt_vec(off), rpy="0 0 0")
-                ET.SubElement(je, "axis", xyz=_fmt_vec(axis))
-                ET.SubElement(je, "limit", lower=_fmt(-1e3), upper=_fmt(1e3), effort="0", velocity="0")
-                root.append(ET.Element("link", name=cn))
-                root.append(je)
-                jnames.append(jn)
-                parent = cn
-                tags.append(ET.Element(f"{_Q}joint", name=jn, role="spring"))
-            sp = ET.Element(f"{_Q}spring", name=sname, link=link, joints=" ".join(jnames))
-            ET.SubElement(sp, f"{_Q}stiffness").text = _fmt_vec(k_mat)
-            ET.SubElement(sp, f"{_Q}rest").text = _fmt_vec(rest)
-            if beam_dict is not None:
-                ET.SubElement(
-                    sp,
-                    f"{_Q}beam",
-                    {k: (v if k == "section" else _fmt(v)) for k, v in beam_dict.items()},
-                    dofs=" ".join(dofs),
-                    subdivide=str(k_sub),
-                )
-            tags.append(sp)
-        child.find("parent").set("link", parent)
-        _set_origin(child, np.zeros(3), rpy)
-
-    for t in tags:
-        root.append(t)
-    ET.indent(root, space="  ")
-    return ET.tostring(root, encoding="unicode") + "\n"
+        tags.append(sp)
+    return elems, tags, parent

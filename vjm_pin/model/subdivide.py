@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from vjm_pin.exceptions import ModelError, SpecError
-from vjm_pin.model.generator import SPRING_SUFFIX, link_spring_matrix
 from vjm_pin.model.format import COMPONENTS, NS, _read_root, load_vjm
+from vjm_pin.model.generator import link_spring_matrix, spring_chain
 
 _Q = f"{{{NS}}}"
 
@@ -109,44 +109,10 @@ def subdivide_vjm(source: str | Path, k: int) -> str:
         kmat, dofs_out, rest_out, beam_dict = link_spring_matrix(
             {"beam": sub_beam, "dofs": dofs}, name, tip / k
         )
-        new_elems: list[ET.Element] = []
-        tags: list[ET.Element] = []
-        for s in range(k):
-            sname = f"{name}_s{s + 1}"
-            names = []
-            for d_i, dof in enumerate(dofs_out):
-                c = COMPONENTS.index(dof)
-                jn = f"{sname}_vjm_{SPRING_SUFFIX[c]}"
-                cn = f"{jn}_frame"
-                if jn in joints or cn in links:
-                    raise ModelError(f"generated name '{jn}' clashes with an element of the URDF")
-                axis = np.zeros(3)
-                axis[c % 3] = 1.0
-                je = ET.Element("joint", name=jn, type="prismatic" if c < 3 else "revolute")
-                ET.SubElement(je, "parent", link=parent)
-                ET.SubElement(je, "child", link=cn)
-                ET.SubElement(
-                    je, "origin", xyz=_fmt_vec(tip / k if d_i == 0 else np.zeros(3)), rpy="0 0 0"
-                )
-                ET.SubElement(je, "axis", xyz=_fmt_vec(axis))
-                ET.SubElement(
-                    je, "limit", lower=_fmt(-1e3), upper=_fmt(1e3), effort="0", velocity="0"
-                )
-                new_elems += [ET.Element("link", name=cn), je]
-                tags.append(ET.Element(f"{_Q}joint", name=jn, role="spring"))
-                names.append(jn)
-                parent = cn
-            el = ET.Element(f"{_Q}spring", name=sname, link=sp.get("link"), joints=" ".join(names))
-            ET.SubElement(el, f"{_Q}stiffness").text = _fmt_vec(kmat)
-            ET.SubElement(el, f"{_Q}rest").text = _fmt_vec(rest_out)
-            ET.SubElement(
-                el,
-                f"{_Q}beam",
-                {kk: (v if kk == "section" else _fmt(v)) for kk, v in beam_dict.items()},
-                dofs=" ".join(dofs_out),
-                subdivide=str(k),
-            )
-            tags.append(el)
+        new_elems, tags, parent = spring_chain(
+            [f"{name}_s{s + 1}" for s in range(k)], sp.get("link"), parent, dofs_out, tip / k,
+            kmat, rest_out, beam_dict, k, joints, links, ModelError,
+        )
         for j in downstream:
             j.find("parent").set("link", parent)
         for i, el in enumerate(tags):
