@@ -292,22 +292,36 @@ def default_frame(source, srdf: Path | None = None) -> str:
 
 
 # ----------------------------------------------------------------------------- SRDF
-def srdf_states(srdf) -> dict[str, dict[str, float]]:
-    """Named states ``<group_state name=...>`` of an SRDF: name → {joint: value (rad, m)}.
-    States of several groups with the same name are merged."""
+def srdf_states(srdf, urdf_text: str) -> dict[str, dict[str, float]]:
+    """Named states ``<group_state name=...>`` of an SRDF: name → {joint: value (rad, m)} for
+    every 1-DOF joint of the URDF (joints a state does not list at Pinocchio's neutral value).
+
+    Read by Pinocchio's own SRDF reader (``pin.loadReferenceConfigurations``), so a state
+    means here what it means in every Pinocchio tool; a continuous joint (``cos, sin`` in
+    Pinocchio) is returned as its angle.
+
+    Raises:
+        ModelError: the SRDF cannot be read.
+    """
     if srdf is None:
         return {}
+    import pinocchio as pin
+
+    model = pin.buildModelFromXML(urdf_text)
     try:
-        root = ET.parse(str(srdf)).getroot()
-    except (ET.ParseError, OSError) as e:
-        raise ModelError(f"SRDF {srdf}: {e}") from None
+        pin.loadReferenceConfigurations(model, str(srdf), False)
+    except (RuntimeError, OSError, ValueError) as e:
+        raise ModelError(f"SRDF {srdf}: {str(e).splitlines()[0] if str(e) else type(e).__name__}") from None
     out: dict[str, dict[str, float]] = {}
-    for gs in root.findall("group_state"):
-        d = out.setdefault(gs.get("name"), {})
-        for j in gs.findall("joint"):
-            vals = (j.get("value") or "").split()
-            if len(vals) == 1:
-                d[j.get("name")] = float(vals[0])
+    for entry in model.referenceConfigurations:
+        q = np.asarray(entry.data(), dtype=float)
+        state = out.setdefault(entry.key(), {})
+        for j in range(1, model.njoints):
+            jm = model.joints[j]
+            if jm.nq == 1:
+                state[model.names[j]] = float(q[jm.idx_q])
+            elif jm.nq == 2 and jm.nv == 1:  # continuous: (cos, sin)
+                state[model.names[j]] = float(np.arctan2(q[jm.idx_q + 1], q[jm.idx_q]))
     return out
 
 
@@ -477,7 +491,7 @@ def build_robot(
         src = source
     text = _strip_transmissions(src.urdf)
     tree = urdf_tree(text)
-    states = srdf_states(src.srdf)
+    states = srdf_states(src.srdf, text)
     pose: dict[str, float] = {}
     used = None
     if pose_name is not None:
