@@ -28,7 +28,13 @@ Minimum and median over repeats are reported (other processes share the machine)
 are never asserted by tests; ``tests/test_benchmark_smoke.py`` runs these functions on tiny
 sizes and checks structure and that the baseline reproduces the Pinocchio results.
 
-Usage: ``python scripts/benchmark.py [--quick] [--json bench.json] [--repeats N] [--quick-wins-only]``.
+- the targets of issue 14 (``run_issue14``, ``--issue14-only``): the Newton iteration against the
+  Pinocchio floor on Model C and ur5 with 6-D link springs, and the marginal cost of a Model C
+  curve point, each for the release solver (the frozen copy in ``scripts/release_solver/``)
+  and the current one interleaved; the k = 8 / k = 1 per-point ratio; ``vjm-pin analyze ur5``
+  against ``import pinocchio`` (fresh interpreters); serial map poses/s.
+
+Usage: ``python scripts/benchmark.py [--quick] [--json bench.json] [--repeats N] [--quick-wins-only] [--issue14-only]``.
 """
 
 from __future__ import annotations
@@ -151,6 +157,7 @@ class FDKinematics(Kinematics):
 
     def __init__(self, model: pin.Model, frame_id: int, h: float = 1e-5, h_hessian: float = 3e-4, h_inner: float = 3e-5):
         super().__init__(model, frame_id)
+        self.screw = False  # H by differences of J, not in screw form from the FD Jacobian
         self.h = h
         self.h_hessian = h_hessian
         self.h_inner = h_inner
@@ -728,7 +735,8 @@ def _evaluate_pose_before(vm, names, values, wrench, method="eq30"):
     terms every Newton iteration (a model copy + ``createData`` + RNEA each; reproduced here by a
     gravity of 1e-300 m/s², whose terms are numerically nothing but cost the same)."""
     from vjm_pin.exceptions import NoEquilibrium, SingularStiffness
-    from vjm_pin.loads import LinkLoads, solve_loaded
+    release_solver_class()  # scripts/ on sys.path
+    from release_solver.loads import LinkLoads, solve_loaded  # frozen copy: vjm_pin.loads is deleted
     from vjm_pin.analysis.maps import stiffness_indices
 
     v = vm.with_positions(dict(zip(names, (float(x) for x in values))))
@@ -833,6 +841,290 @@ def format_quick_wins(q: dict, machine: dict) -> str:
             f"  map {label}, {m['poses']} poses serial: {m['before_poses_per_s']:.0f} -> {m['after_poses_per_s']:.0f} poses/s: "
             f"{m['speedup']:.2f}x; k_along agrees to {m['k_along_max_rel_diff']:.1e} (rel)"
         )
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------- issue 14 targets
+def release_solver_class():
+    """``EquilibriumSolver`` as released before issue 14's kernel work: the frozen copy in
+    ``scripts/release_solver/`` (its own Kinematics, blocks and stability; Pinocchio's
+    kinematic Hessian tensor; scipy.linalg imported at module level)."""
+    if str(HERE) not in sys.path:
+        sys.path.insert(0, str(HERE))
+    from release_solver import EquilibriumSolver as Release
+
+    return Release
+
+
+def _pin_floor_fn(vm: VjmModel):
+    """One Pinocchio J + kinematic Hessian evaluation at the end frame (the floor of issue 14)."""
+    model, data, fid = vm.model, vm.model.createData(), vm.frame_id
+    x = vm.reference.copy()
+
+    def floor():
+        pin.computeJointJacobians(model, data, x)
+        pin.updateFramePlacement(model, data, fid)
+        pin.getFrameJacobian(model, data, fid, pin.LOCAL_WORLD_ALIGNED)
+        pin.computeJointKinematicHessians(model, data)
+        pin.getFrameKinematicHessian(model, data, fid, pin.LOCAL_WORLD_ALIGNED)
+
+    return floor
+
+
+def _warm_solves(vm: VjmModel, cls, direction: np.ndarray, max_deflection: float, steps: int):
+    """A function that builds a ``cls`` solver and solves the first point (untimed), then times
+    ``steps`` further warm-started deflection-driven solves along ``direction`` (each from the
+    previous equilibrium); returns (seconds, iterations, forces along the direction)."""
+    pts = np.linspace(max_deflection / (steps + 1), max_deflection, steps + 1)
+
+    def run():
+        s = cls(vm)
+        prev = s.solve(pts[0] * direction)
+        total, forces = 0, []
+        t = time.perf_counter()
+        for d in pts[1:]:
+            r = s.solve(d * direction, x0=prev.x, wrench0=prev.wrench)
+            total += r.iterations
+            forces.append(float(r.wrench @ direction))
+            prev = r
+        return time.perf_counter() - t, total, np.array(forces)
+
+    return run
+
+
+UR5_DIRECTION = np.array([0.0, 0.0, -1.0, 0.0, 0.0, 0.0])
+
+
+def bench_newton_vs_floor(label: str, vm: VjmModel, direction, max_deflection: float, steps: int, repeats: int, number: int) -> dict:
+    """Newton iteration (warm-started solves / their iterations, solver construction and the
+    first solve excluded) of the release solver and of the current one against the Pinocchio
+    floor, the three interleaved in one process (min over repeats)."""
+    floor = _pin_floor_fn(vm)
+    runs = {"release": _warm_solves(vm, release_solver_class(), direction, max_deflection, steps),
+            "now": _warm_solves(vm, EquilibriumSolver, direction, max_deflection, steps)}
+    best = {"floor": float("inf"), "release": float("inf"), "now": float("inf")}
+    last = {}
+    for _ in range(repeats):
+        t = time.perf_counter()
+        for _ in range(number):
+            floor()
+        best["floor"] = min(best["floor"], (time.perf_counter() - t) / number)
+        for k, fn in runs.items():
+            secs, its, forces = fn()
+            last[k] = (its, forces)
+            best[k] = min(best[k], secs / max(its, 1))
+    fl = best["floor"]
+    return {
+        "label": label,
+        "nv": int(vm.model.nv),
+        "solves": steps,
+        "floor_s": fl,
+        "iterations": {k: int(v[0]) for k, v in last.items()},
+        "per_iteration_s": {"release": best["release"], "now": best["now"]},
+        "over_floor": {"release": best["release"] / fl, "now": best["now"] / fl},
+        "speedup": best["release"] / best["now"],
+        "force_agreement": float(np.abs(last["release"][1] - last["now"][1]).max() / max(np.abs(last["release"][1]).max(), 1e-300)),
+    }
+
+
+def bench_curve_point_vs_release(k: int, steps: int, repeats: int) -> dict:
+    """Marginal cost of one point of the Model C compression curve (``trace_curve``: equilibrium,
+    stability, stiffness, critical points) with the release solver and the current one,
+    interleaved: ``(T(steps) − T(steps/4)) / (steps − steps/4)`` over the same deflection range,
+    so the solver construction, the cold first point and the critical-point location, common to
+    both curves, cancel. Also the whole ``steps``-point curve time."""
+    from vjm_pin.analysis.curve import trace_curve
+
+    vm = paper_model(k)
+    md = default_max_deflection(vm)
+    Release = release_solver_class()
+    short = max(steps // 4, 2)
+
+    def curve(cls, n):
+        return lambda: _curve_summary(trace_curve(vm, DIRECTION, md, steps=n, solver=cls(vm)))
+
+    r = side_by_side(
+        {
+            "release": (contextlib.nullcontext, curve(Release, steps)),
+            "now": (contextlib.nullcontext, curve(EquilibriumSolver, steps)),
+            "release_short": (contextlib.nullcontext, curve(Release, short)),
+            "now_short": (contextlib.nullcontext, curve(EquilibriumSolver, short)),
+        },
+        repeats,
+    )
+    marg = {v: max(r[v]["min"] - r[v + "_short"]["min"], 1e-9) / (steps - short) for v in ("release", "now")}
+    return {
+        "k": k,
+        "n_theta": int(vm.n_theta),
+        "steps": steps,
+        "short_steps": short,
+        "curve_s": {"release": r["release"]["min"], "now": r["now"]["min"]},
+        "per_point_s": marg,
+        "speedup": marg["release"] / marg["now"],
+        "curve_speedup": r["release"]["min"] / r["now"]["min"],
+        "agreement": _agreement(r["release"]["value"], r["now"]["value"]),
+        "critical": r["now"]["value"]["critical"],
+    }
+
+
+#: The release the "release" columns compare with (before issue 14's kernel and import work).
+RELEASE_COMMIT = "dbe652d01b31500ab43be497eb59e8523571ec7e"
+
+
+def _release_package_dir() -> str | None:
+    """A temporary directory holding ``vjm_pin`` as of :data:`RELEASE_COMMIT` (``git archive``),
+    or None when git or the commit is unavailable."""
+    import io
+    import subprocess
+    import tarfile
+    import tempfile
+
+    try:
+        out = subprocess.run(["git", "-C", str(HERE.parent), "archive", "--format=tar", RELEASE_COMMIT, "vjm_pin"],
+                             capture_output=True, check=True, timeout=60).stdout
+    except (OSError, subprocess.SubprocessError):
+        return None
+    d = tempfile.mkdtemp(prefix="vjm_release_")
+    with tarfile.open(fileobj=io.BytesIO(out)) as tf:
+        try:
+            tf.extractall(d, filter="data")
+        except TypeError:  # Python without extraction filters (our own repository's archive)
+            tf.extractall(d)  # noqa: S202
+    return d
+
+
+def bench_import_wall(repeats: int = 5) -> dict:
+    """Wall time of ``vjm-pin analyze ur5 --wrench 0 0 -100`` (in-process entry point, a fresh
+    interpreter) against ``python -c "import pinocchio"``, now and as released (the package of
+    :data:`RELEASE_COMMIT` first on ``PYTHONPATH``), interleaved subprocesses, min of
+    ``repeats``. Byte-code caching is allowed (in a temporary ``PYTHONPYCACHEPREFIX``, warmed
+    once) even when the environment disables it, as for an installed package."""
+    import subprocess
+    import tempfile
+
+    env = dict(os.environ)
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
+    env["PYTHONPYCACHEPREFIX"] = tempfile.mkdtemp(prefix="vjm_bench_pyc_")
+    analyze = "import sys; from vjm_pin.cli import main; sys.exit(main(['analyze', 'ur5', '--wrench', '0', '0', '-100']))"
+    cmds = {
+        "import pinocchio": ([sys.executable, "-c", "import pinocchio"], env),
+        "analyze ur5": ([sys.executable, "-c", analyze], env),
+        "python": ([sys.executable, "-c", "pass"], env),
+    }
+    rel = _release_package_dir()
+    if rel is not None:
+        env_rel = dict(env, PYTHONPATH=rel + os.pathsep + env.get("PYTHONPATH", ""))
+        cmds["analyze ur5 (release)"] = ([sys.executable, "-c", analyze], env_rel)
+    for c, e in cmds.values():  # warm the byte-code cache and the file cache
+        subprocess.run(c, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=e, check=False)
+    best = {k: float("inf") for k in cmds}
+    for _ in range(repeats):
+        for k, (c, e) in cmds.items():
+            t = time.perf_counter()
+            p = subprocess.run(c, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=e, check=False)
+            if p.returncode != 0:
+                return {"skipped": f"{k} failed: {p.stderr.decode()[-300:]}"}
+            best[k] = min(best[k], time.perf_counter() - t)
+    out = {"wall_s": best, "ratio": best["analyze ur5"] / best["import pinocchio"], "repeats": repeats}
+    if rel is not None:
+        out["release_ratio"] = best["analyze ur5 (release)"] / best["import pinocchio"]
+    return out
+
+
+def bench_map_rate(n: int, repeats: int) -> dict:
+    """Serial ``evaluate_pose`` throughput (poses/s), ur5 with actuator springs and with 6-D link
+    springs, loaded by 100 N along −z (the map module's own pose evaluation)."""
+    try:
+        from vjm_pin.analysis.maps import evaluate_pose, sample_poses
+        from vjm_pin.model.robots import build_robot
+    except ImportError as e:
+        return {"skipped": str(e)}
+    out = {}
+    w = np.array([0.0, 0.0, -100.0, 0.0, 0.0, 0.0])
+    for label, make in (("ur5 actuator springs", lambda: build_robot("ur5").vm), ("ur5 + 6-D link springs", ur5_model)):
+        try:
+            vm = make()
+            names, poses = sample_poses(vm, n, seed=0)
+            t = timeit(lambda: [evaluate_pose(vm, names, row, w) for row in poses], repeats)
+        except Exception as e:  # noqa: BLE001 - example-robot-data missing, API change, ...
+            out[label] = {"skipped": f"{type(e).__name__}: {e}"}
+            continue
+        out[label] = {"poses": n, "poses_per_s": n / t["min"]}
+    return out
+
+
+def run_issue14(quick: bool = False, repeats: int = 5) -> dict:
+    """Every target of issue 14 this script can measure, as ratios measured side by side."""
+    reps = 2 if quick else repeats
+    vm_c = paper_model(1)
+    out = {
+        "newton_model_c": bench_newton_vs_floor("Model C (paper-c-s)", vm_c, DIRECTION, default_max_deflection(vm_c), 20 if quick else 100, reps, 20 if quick else 200),
+        "curve_k1": bench_curve_point_vs_release(1, 20 if quick else 200, reps),
+        "curve_k8": bench_curve_point_vs_release(2 if quick else 8, 10 if quick else 100, 1 if quick else max(2, reps // 2)),
+    }
+    try:
+        vm_u = ur5_model()
+        out["newton_ur5"] = bench_newton_vs_floor("ur5 + 6-D link springs", vm_u, UR5_DIRECTION, 1e-3, 20 if quick else 100, reps, 20 if quick else 200)
+    except Exception as e:  # noqa: BLE001 - example-robot-data missing
+        out["newton_ur5"] = {"skipped": f"{type(e).__name__}: {e}"}
+    k1, k8 = out["curve_k1"], out["curve_k8"]
+    out["k8_over_k1"] = {
+        "release": k8["per_point_s"]["release"] / k1["per_point_s"]["release"],
+        "now": k8["per_point_s"]["now"] / k1["per_point_s"]["now"],
+        "k": k8["k"],
+    }
+    out["import"] = bench_import_wall(2 if quick else repeats)
+    out["map"] = bench_map_rate(10 if quick else 100, 1 if quick else 3)
+    return out
+
+
+def format_issue14(q: dict, machine: dict) -> str:
+    us = 1e6
+    lines = [
+        "issue 14 targets, measured side by side in this run (min of interleaved repeats; 'release' = the",
+        "frozen copy of the solver before issue 14's kernel work, scripts/release_solver/)",
+        f"machine: {machine['cores']} cores, {machine['cpu']}; BLAS {machine['blas']}",
+    ]
+    for key in ("newton_model_c", "newton_ur5"):
+        n = q.get(key, {})
+        if "skipped" in n:
+            lines.append(f"  Newton iteration {key}: skipped ({n['skipped']})")
+            continue
+        lines.append(
+            f"  Newton iteration, {n['label']} (nv={n['nv']}, {n['solves']} warm-started solves): floor {n['floor_s'] * us:.1f} µs; "
+            f"release {n['per_iteration_s']['release'] * us:.1f} µs = {n['over_floor']['release']:.1f}x floor; "
+            f"now {n['per_iteration_s']['now'] * us:.1f} µs = {n['over_floor']['now']:.1f}x floor "
+            f"(target <= 3x: {'MET' if n['over_floor']['now'] <= 3 else 'NOT MET'}); {n['speedup']:.2f}x faster; "
+            f"iterations {n['iterations']['release']} / {n['iterations']['now']}; forces agree to {n['force_agreement']:.1e}"
+        )
+    for key in ("curve_k1", "curve_k8"):
+        c = q[key]
+        lines.append(
+            f"  curve point, Model C k={c['k']} (nθ={c['n_theta']}, {c['steps']} points): release {c['per_point_s']['release'] * 1e3:.2f} ms, "
+            f"now {c['per_point_s']['now'] * 1e3:.2f} ms (marginal): {c['speedup']:.2f}x; whole curve {c['curve_s']['release']:.2f} -> {c['curve_s']['now']:.2f} s"
+            + (f" (target >= 10x: {'MET' if c['speedup'] >= 10 else 'NOT MET'})" if c["k"] == 1 else "")
+            + f"; forces and critical points agree to {c['agreement']:.1e}"
+        )
+    r = q["k8_over_k1"]
+    lines.append(
+        f"  per-point cost k={r['k']} / k=1: release {r['release']:.1f}x, now {r['now']:.1f}x"
+        + (f" (target <= 12x: {'MET' if r['now'] <= 12 else 'NOT MET'})" if r["k"] == 8 else "")
+    )
+    im = q["import"]
+    if "skipped" in im:
+        lines.append(f"  analyze ur5 vs import pinocchio: skipped ({im['skipped']})")
+    else:
+        w = im["wall_s"]
+        lines.append(
+            f"  `vjm-pin analyze ur5 --wrench 0 0 -100` {w['analyze ur5']:.3f} s vs `import pinocchio` {w['import pinocchio']:.3f} s "
+            f"(bare python {w['python']:.3f} s): {im['ratio']:.2f}x (target <= 2x: {'MET' if im['ratio'] <= 2 else 'NOT MET'})"
+            + (f"; as released {w['analyze ur5 (release)']:.3f} s = {im['release_ratio']:.2f}x" if "release_ratio" in im else "")
+        )
+    for label, m in q["map"].items() if isinstance(q["map"], dict) and "skipped" not in q["map"] else []:
+        if "skipped" in m:
+            lines.append(f"  map {label}: skipped ({m['skipped']})")
+        else:
+            lines.append(f"  map {label}, {m['poses']} poses, serial evaluate_pose: {m['poses_per_s']:.0f} poses/s (one core)")
     return "\n".join(lines)
 
 
@@ -951,6 +1243,7 @@ def run(quick: bool = False, repeats: int = 5, opensees: bool = True, scaling_ks
     report["ur5"] = bench_ur5(repeats=1 if quick else 3)
     report["map"] = bench_map(n=40 if quick else 200)
     report["quick_wins"] = run_quick_wins(quick, repeats=3)
+    report["issue14"] = run_issue14(quick, repeats=3 if quick else repeats)
     report["targets"] = targets(report)
     return report
 
@@ -969,7 +1262,15 @@ def main(argv=None) -> int:
     ap.add_argument("--no-opensees", action="store_true")
     ap.add_argument("--opensees-k", type=int, default=8, help="elements (and VJM subdivisions) per link for the peer")
     ap.add_argument("--quick-wins-only", action="store_true", help="only the before/after table of issue 14's quick wins")
+    ap.add_argument("--issue14-only", action="store_true", help="only the issue 14 targets (release solver vs now, side by side)")
     args = ap.parse_args(argv)
+    if args.issue14_only:
+        machine = machine_info()
+        q = run_issue14(args.quick, repeats=args.repeats)
+        print(format_issue14(q, machine))
+        Path(args.json).write_text(json.dumps({"machine": machine, "issue14": q}, indent=1, default=_json_default))
+        print(f"\nJSON: {args.json}")
+        return 0
     if args.quick_wins_only:
         machine = machine_info()
         q = run_quick_wins(args.quick, repeats=args.repeats)
@@ -981,6 +1282,8 @@ def main(argv=None) -> int:
     print(format_report(report))
     print()
     print(format_quick_wins(report["quick_wins"], report["machine"]))
+    print()
+    print(format_issue14(report["issue14"], report["machine"]))
     Path(args.json).write_text(json.dumps(report, indent=1, default=_json_default))
     print(f"\nJSON: {args.json}")
     return 0

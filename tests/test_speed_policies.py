@@ -10,13 +10,13 @@ import pytest
 from threadpoolctl import threadpool_info, threadpool_limits
 
 import vjm_pin.kinematics.chain as kmod
+from vjm_pin.analysis.curve import trace_curve
 from vjm_pin.exceptions import InputError
-from vjm_pin.kinematics.chain import FLUSH_BELOW, Kinematics, flush_tiny
+from vjm_pin.kinematics.chain import FLUSH_BELOW, flush_tiny
 from vjm_pin.model.format import load_vjm
 from vjm_pin.model.paper_models import PAPER_BEAM, paper_model_urdf
 from vjm_pin.model.registry import resolve_model
 from vjm_pin.solver import EquilibriumSolver, loaded_stiffness
-from vjm_pin.analysis.curve import trace_curve
 from vjm_pin.solver import threads as tmod
 
 COMPRESSION = np.array([-1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
@@ -158,29 +158,6 @@ def test_map_pose_one_blas_thread_and_shared_kinematics(two_blas_threads, monkey
         assert fresh["k_along"] == row["k_along"] and fresh["k_min"] == row["k_min"]
 
 
-def test_no_gravity_skips_link_load_terms_same_blocks():
-    from vjm_pin.loads import LinkLoads, load_hessian, loaded_blocks, static_residual
-    from vjm_pin.model.robots import build_robot
-    from vjm_pin.solver import blocks_at
-
-    vm = build_robot("ur5").vm
-    x = vm.reference + 0.1
-    w = np.array([10.0, -5.0, -100.0, 1.0, 0.0, 2.0])
-    none = LinkLoads.none()
-    kin = Kinematics(vm.model, vm.frame_id)
-    b = loaded_blocks(vm, x, w, none, kin)
-    ref = blocks_at(vm, x, w)
-    hg = load_hessian(vm, none, x)  # evaluated anyway: zero without gravity
-    assert not np.any(hg)
-    np.testing.assert_array_equal(b.H_tt, ref.H_tt + hg[np.ix_(vm.theta_idx, vm.theta_idx)])
-    # the residual without the G term equals the full one with G = 0
-    st = kin.evaluate(x, hessian=False)
-    r = static_residual(vm, none, x, w, kin)
-    gen = -(st.jacobian.T @ w)
-    gen[vm.theta_idx] += vm.K_theta @ (x[vm.theta_idx] - vm.theta0)
-    np.testing.assert_allclose(r, gen[vm.theta_idx], rtol=0, atol=1e-12 * np.abs(gen).max())
-
-
 def test_benchmark_quick_wins_section_runs_and_before_after_agree():
     """scripts/benchmark.py's before/after section on tiny sizes: structure, and the old path
     (switches off, the copy of the old map pose evaluation) gives the same numbers."""
@@ -206,3 +183,71 @@ def test_benchmark_quick_wins_section_runs_and_before_after_agree():
     assert "trace_curve k=1" in text and "poses/s" in text
     # the switches are restored after the section
     assert kmod._flush_enabled and tmod._enabled
+
+
+def test_solver_lapack_is_scipys_lapack_without_importing_scipy_linalg():
+    """vjm_pin.solver.lapack loads scipy's compiled LAPACK module alone: importing the solver
+    and solving does not import scipy.linalg, and a later ``import scipy.linalg`` reuses the
+    very same routines (so results are those of scipy.linalg.lapack bit for bit)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "from vjm_pin.model.registry import resolve_model\n"
+        "from vjm_pin.solver import EquilibriumSolver\n"
+        "r = EquilibriumSolver(resolve_model('paper-c-s')).solve([-1e-5, 0, 0])\n"
+        "assert r.converged and r.stable\n"
+        "assert 'scipy.linalg' not in sys.modules, 'scipy.linalg imported'\n"
+        "from vjm_pin.solver.lapack import lapack\n"
+        "import scipy.linalg\n"
+        "names = ['dgeqrf', 'dorgqr', 'dtrtrs', 'dgesdd', 'dsyevd', 'dpotrf', 'dgesv', 'dgetrf', 'dgetri']\n"
+        "assert all(getattr(lapack, n) is getattr(scipy.linalg.lapack, n) for n in names)\n"
+        "print('ok')\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=False)
+    assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr[-2000:]
+
+
+def test_solve_triangular_matches_scipy():
+    import scipy.linalg
+
+    from vjm_pin.solver.lapack import solve_triangular
+
+    rng = np.random.default_rng(4)
+    a = np.triu(rng.standard_normal((7, 7))) + 3 * np.eye(7)
+    for mat in (a, np.asfortranarray(a), a[:5, :5]):
+        n = mat.shape[0]
+        for b in (rng.standard_normal(n), rng.standard_normal((n, 2))):
+            for trans in (0, "T", 1):
+                np.testing.assert_array_equal(solve_triangular(mat, b, trans=trans), scipy.linalg.solve_triangular(mat, b, trans=trans))
+    sing = a.copy()
+    sing[3, 3] = 0.0
+    with pytest.raises(np.linalg.LinAlgError):
+        solve_triangular(sing, np.ones(7))
+    with pytest.raises(ValueError):
+        solve_triangular(a, np.full(7, np.nan))
+
+
+def test_benchmark_issue14_section_runs_and_release_solver_agrees():
+    """scripts/benchmark.py's issue 14 section on tiny sizes: the frozen release solver
+    (scripts/release_solver/) and the current one give the same forces and critical points."""
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "benchmark.py"
+    spec = importlib.util.spec_from_file_location("vjm_benchmark_i14", path)
+    bench = importlib.util.module_from_spec(spec)
+    sys.modules["vjm_benchmark_i14"] = bench
+    spec.loader.exec_module(bench)
+    vm = resolve_model("paper-c-s")
+    n = bench.bench_newton_vs_floor("C", vm, COMPRESSION, _max_deflection(), 4, 1, 2)
+    assert n["force_agreement"] <= 1e-12 and n["iterations"]["release"] == n["iterations"]["now"]
+    assert n["floor_s"] > 0 and n["per_iteration_s"]["now"] > 0
+    c = bench.bench_curve_point_vs_release(1, 8, 1)
+    assert c["agreement"] <= 1e-12 and len(c["critical"]) == 1
+    q = {"newton_model_c": n, "newton_ur5": {"skipped": "not run here"}, "curve_k1": c, "curve_k8": c,
+         "k8_over_k1": {"release": 1.0, "now": 1.0, "k": 1}, "import": {"skipped": "not run here"}, "map": {}}
+    text = bench.format_issue14(q, bench.machine_info())
+    assert "Newton iteration, C" in text and "curve point, Model C k=1" in text

@@ -11,8 +11,8 @@
 
 from vjm_pin.kinematics.chain import (
     FLUSH_BELOW,
-    KinematicState,
     Kinematics,
+    KinematicState,
     contract_hessian,
     deflection,
     displace,

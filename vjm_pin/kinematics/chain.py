@@ -24,6 +24,8 @@ import numpy as np
 import pinocchio as pin
 
 from vjm_pin.exceptions import ArgumentError, InputError
+from vjm_pin.kinematics.screw import psi_hessian_screw, screw_applicable, support_mask
+from vjm_pin.kinematics.shared import data_for
 
 #: Configuration coordinates smaller than this (m, rad) are set to exactly zero after every
 #: solver update (:func:`flush_tiny`). On a straight column the symmetric-mode coordinates
@@ -35,6 +37,10 @@ FLUSH_BELOW = 1e-150
 #: Private switch of :func:`flush_tiny` (False: the old behaviour, for benchmarks and the tests
 #: that show the flush changes no result).
 _flush_enabled = True
+#: Private switch of the screw-form Hessian (:mod:`vjm_pin.kinematics.screw`): False makes
+#: :meth:`Kinematics.psi_hessian` contract Pinocchio's kinematic Hessian tensor for every model
+#: (the behaviour before issue 14; for benchmarks and the tests that compare the two).
+_screw_enabled = True
 
 
 def flush_tiny(x: np.ndarray) -> np.ndarray:
@@ -96,9 +102,9 @@ def contract_hessian(hessian: np.ndarray, wrench: np.ndarray) -> np.ndarray:
 class Kinematics:
     """Evaluates ``g``, ``J`` and the kinematic Hessian of the end frame of a model.
 
-    Holds one ``pin.Data`` that is reused across calls (not thread-safe: one instance
-    per thread). The caller's ``pin.Model`` is never modified. The last evaluation is
-    kept: asking again at the same configuration (bit for bit) returns the same
+    Uses the thread's shared ``pin.Data`` of the model (:mod:`vjm_pin.kinematics.shared`):
+    every call recomputes what it reads at its ``x``. The caller's ``pin.Model`` is never
+    modified. The last evaluation is kept: asking again at the same configuration (bit for bit) returns the same
     :class:`KinematicState` without calling Pinocchio (a curve point's final iterate is
     the next solve's start, and its stiffness and stability are evaluated there too).
     """
@@ -113,9 +119,46 @@ class Kinematics:
                 f"frame_id must be a frame index 0..{model.nframes - 1} of the model, got {frame_id!r}"
             )
         self.model = model
-        self.data = model.createData()
         self.frame_id = int(frame_id)
         self._last: tuple[bytes, KinematicState] | None = None
+        #: Whether the Hessian of Ψ can be taken in screw form from J alone (every joint a 1-DoF
+        #: revolute or prismatic joint): :meth:`psi_hessian`.
+        self.screw = screw_applicable(model)
+        self._masks: dict[bytes, np.ndarray] = {}
+
+    @property
+    def data(self) -> pin.Data:
+        """This thread's shared ``pin.Data`` of the model (:func:`~vjm_pin.kinematics.shared.data_for`;
+        scratch: valid only right after a call that recomputed what you read)."""
+        return data_for(self.model)
+
+    @property
+    def uses_screw(self) -> bool:
+        """True when :meth:`psi_hessian` takes the screw form (no kinematic Hessian tensor needed)."""
+        return self.screw and _screw_enabled
+
+    def psi_hessian(self, state: KinematicState, wrench: np.ndarray, cols: np.ndarray | None = None) -> np.ndarray:
+        """``H[i, j] = ∂(J[:, i]·F)/∂x_j`` (eq. 16) at ``state`` for the 6-D ``wrench``, rows and
+        columns restricted to (and ordered as) the velocity indices ``cols`` (default all).
+
+        In screw form from ``state.jacobian`` (:func:`~vjm_pin.kinematics.screw.psi_hessian_screw`)
+        when :attr:`uses_screw`, else the contraction of Pinocchio's kinematic Hessian (which
+        ``state`` must then carry). Both agree to rounding (``tests/test_screw.py``)."""
+        wrench = np.asarray(wrench, dtype=float)
+        if self.uses_screw:
+            if cols is None:
+                return psi_hessian_screw(state.jacobian, wrench, self.support_mask(None))
+            return psi_hessian_screw(state.jacobian.take(cols, axis=1), wrench, self.support_mask(cols))
+        h = state.psi_hessian(wrench)
+        return h if cols is None else h[np.ix_(cols, cols)]
+
+    def support_mask(self, cols: np.ndarray | None) -> np.ndarray:
+        """:func:`~vjm_pin.kinematics.screw.support_mask` for the columns ``cols``, kept per ``cols``."""
+        key = b"" if cols is None else np.asarray(cols, np.int64).tobytes()
+        mask = self._masks.get(key)
+        if mask is None:
+            mask = self._masks[key] = support_mask(self.model.nv, cols)
+        return mask
 
     def placement(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """End frame (position (3,) m, rotation (3, 3)) at configuration ``x``."""

@@ -53,8 +53,8 @@ import numpy as np
 import pinocchio as pin
 
 from vjm_pin.exceptions import ArgumentError, InputError
-from vjm_pin.kinematics.frames import FrameKinematics
 from vjm_pin.kinematics.chain import KinematicState, contract_hessian
+from vjm_pin.kinematics.frames import FrameKinematics
 from vjm_pin.model.format import COMPONENTS, Closure, VjmModel, relative_placement
 
 #: Default relative tolerance of :func:`constraint_rank` and :func:`min_norm_multipliers`.

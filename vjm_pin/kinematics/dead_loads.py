@@ -13,9 +13,10 @@ with ``J_l`` the ``LOCAL_WORLD_ALIGNED`` Jacobian of frame ``l`` (:mod:`vjm_pin.
 
 Link weights (gravity ``g``, m/s², world axes) are forces ``m_i g`` at the centres of mass
 of the bodies of the Pinocchio model (URDF inertials; links on fixed joints merged into their
-parent body): the same logic as :mod:`vjm_pin.loads` — ``Q_g = −g(x)`` and
+parent body): the same logic as the former ``vjm_pin.loads`` — ``Q_g = −g(x)`` and
 ``∂Q_g/∂x = −∂g/∂x`` of Pinocchio's generalised gravity on a copy of the model carrying
-``g`` (the caller's model is never changed).
+``g`` (the caller's model is never changed), evaluated in the thread's shared ``pin.Data`` of the
+original model (:func:`~vjm_pin.kinematics.shared.data_for`; same joint tree).
 
 Sign: ``Q`` is the force the loads *apply*; at a static equilibrium of springs and passive
 joints it is balanced by the spring torques (eq. 5: ``K_θ(θ − θ₀) = Q_θ + …``).
@@ -30,11 +31,12 @@ import numpy as np
 import pinocchio as pin
 
 from vjm_pin.exceptions import ArgumentError, FrameNotFound, InputError
-from vjm_pin.kinematics.frames import FrameKinematics
 from vjm_pin.kinematics.chain import contract_hessian
+from vjm_pin.kinematics.frames import FrameKinematics
+from vjm_pin.kinematics.shared import data_for
 from vjm_pin.model.format import VjmModel
 
-#: Standard gravity (m/s²), ISO 80000-3 (the value of :mod:`vjm_pin.loads`).
+#: Standard gravity (m/s²), ISO 80000-3 (the value of the former ``vjm_pin.loads``).
 STANDARD_GRAVITY = 9.80665
 
 #: What a load is, for messages.
@@ -187,7 +189,6 @@ class DeadLoads:
         if self.gravity is not None and np.any(self.gravity):
             self._gmodel = model.copy()  # never change the caller's model
             self._gmodel.gravity.linear = self.gravity
-            self._gdata = self._gmodel.createData()
 
     def evaluate(self, x: np.ndarray, hessian: bool = True) -> LoadState:
         """Generalised force, its derivative (with ``hessian``) and potential at ``x`` (nq,)."""
@@ -205,7 +206,7 @@ class DeadLoads:
             if pot is not None:
                 pot = None if np.any(ld.wrench[3:]) else pot - float(ld.wrench[:3] @ st.position)
         if self._gmodel is not None:
-            gm, gd = self._gmodel, self._gdata
+            gm, gd = self._gmodel, data_for(self.model)  # each call below recomputes at x
             force -= np.asarray(pin.computeGeneralizedGravity(gm, gd, x))
             if hessian:
                 deriv -= np.asarray(pin.computeGeneralizedGravityDerivatives(gm, gd, x))

@@ -18,15 +18,17 @@ import pinocchio as pin
 
 from vjm_pin.exceptions import ArgumentError
 from vjm_pin.kinematics.chain import KinematicState, _vector, fix_hessian_layout
+from vjm_pin.kinematics.shared import data_for
 
 
 class FrameKinematics:
     """Placements, Jacobians and (optionally) kinematic Hessians of a set of frames.
 
-    Holds one ``pin.Data`` reused across calls (not thread-safe: one instance per thread);
-    the caller's ``pin.Model`` is never modified. The last evaluation is kept: asking again
-    at the same configuration (bit for bit) returns the same states without calling
-    Pinocchio.
+    Uses the thread's shared ``pin.Data`` of the model (:func:`~vjm_pin.kinematics.shared.data_for`,
+    created on the first evaluation, none at construction): every evaluation recomputes all it
+    reads at its ``x`` and copies it out. The caller's ``pin.Model`` is never modified. The last
+    evaluation is kept: asking again at the same configuration (bit for bit) returns the same
+    states without calling Pinocchio.
 
     Args:
         model: A Pinocchio model with nq = nv (the VJM coordinates).
@@ -49,7 +51,6 @@ class FrameKinematics:
             if int(f) not in ids:
                 ids.append(int(f))
         self.model = model
-        self.data = model.createData()
         self.frame_ids: tuple[int, ...] = tuple(ids)
         self._last: tuple[bytes, dict[int, KinematicState]] | None = None
 
@@ -66,7 +67,8 @@ class FrameKinematics:
             and (hessian is False or all(s.hessian is not None for s in last[1].values()))
         ):
             return last[1]
-        model, data, nv = self.model, self.data, self.model.nv
+        model, nv = self.model, self.model.nv
+        data = data_for(model)
         pin.computeJointJacobians(model, data, x)
         if hessian:
             pin.computeJointKinematicHessians(model, data)
@@ -82,3 +84,9 @@ class FrameKinematics:
             states[fid] = KinematicState(m.translation.copy(), m.rotation.copy(), jac.copy(), hes)
         self._last = (key, states)
         return states
+
+    @property
+    def data(self) -> pin.Data:
+        """This thread's shared ``pin.Data`` of the model (scratch: valid only right after a call
+        that recomputed what you read)."""
+        return data_for(self.model)

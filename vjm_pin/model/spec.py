@@ -8,6 +8,12 @@ document and raises one :class:`~vjm_pin.exceptions.SpecProblems` listing every 
 
 Checks that need the URDF (joint and link names, the shape of a stiffness matrix against
 its ``dofs``, positive definiteness) stay in :func:`vjm_pin.model.generator.generate_vjm`.
+
+Import time (issue 14): pydantic is imported and the models are built on first use
+(:func:`_schema`; the names ``SpringSpec``, ``LinkSpec``, ``BeamSpec`` … stay importable through
+the module ``__getattr__``). A plain valid document without link springs — what the robot
+catalogue passes for a one-shot ``vjm-pin analyze ur5`` — is read by :func:`_fast_spec` with the
+schema's own value validators and no pydantic; anything else goes through the schema.
 """
 
 from __future__ import annotations
@@ -17,10 +23,9 @@ import difflib
 import math
 from functools import partial
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Any
 
 import numpy as np
-from pydantic import BaseModel, BeforeValidator, ConfigDict, ValidationError, model_validator
 
 from vjm_pin.exceptions import ArgumentError, SpecProblems
 
@@ -77,94 +82,118 @@ def _positive_int(v: Any) -> int:
     return int(v)
 
 
-Number = Annotated[float, BeforeValidator(_number)]
-Positive = Annotated[float, BeforeValidator(partial(_number, positive=True))]
-Name = Annotated[str, BeforeValidator(_name)]
-Components = Annotated[list[str], BeforeValidator(_components)]
-PositiveInt = Annotated[int, BeforeValidator(_positive_int)]
+#: The top-level keys of a spring specification (the fields of :class:`SpringSpec`, in order).
+SPEC_KEYS = ("name", "frame", "task", "actuators", "passive", "positions", "links", "subdivide")
+#: The keys of ``links.<link>`` (:class:`LinkSpec`) and of ``links.<link>.beam`` (:class:`BeamSpec`).
+LINK_KEYS = ("beam", "stiffness", "dofs", "rest")
+BEAM_KEYS = ("length", "section", "a", "b", "diameter", "outer_diameter", "wall", "E", "nu", "G")
+
+#: Names of the pydantic schema, built on first use (:func:`_schema`): importing pydantic and
+#: building the models costs ~0.3–0.5 s, more than a one-shot ``vjm-pin analyze`` of a catalogue
+#: robot needs (its spec takes :func:`_fast_spec`). ``from vjm_pin.model.spec import LinkSpec``
+#: still works (module ``__getattr__``, PEP 562).
+_SCHEMA_NAMES = ("Number", "Positive", "Name", "Components", "PositiveInt", "BeamSpec", "LinkSpec", "SpringSpec")
+_SCHEMA: dict[str, Any] = {}
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+def _schema() -> dict[str, Any]:
+    """The pydantic models of the specification (built once)."""
+    if _SCHEMA:
+        return _SCHEMA
+    from typing import Annotated, Literal
+
+    from pydantic import BaseModel, BeforeValidator, ConfigDict, model_validator
+
+    Number = Annotated[float, BeforeValidator(_number)]
+    Positive = Annotated[float, BeforeValidator(partial(_number, positive=True))]
+    Name = Annotated[str, BeforeValidator(_name)]
+    Components = Annotated[list[str], BeforeValidator(_components)]
+    PositiveInt = Annotated[int, BeforeValidator(_positive_int)]
+
+    class _Strict(BaseModel):
+        model_config = ConfigDict(extra="forbid")
+
+    class BeamSpec(_Strict):
+        """``links.<link>.beam``: a link as a cantilever beam (:mod:`vjm_pin.model.beam`); SI units."""
+
+        length: Positive | None = None
+        section: Literal["rectangle", "circle", "tube"]
+        a: Positive | None = None
+        b: Positive | None = None
+        diameter: Positive | None = None
+        outer_diameter: Positive | None = None
+        wall: Positive | None = None
+        E: Positive
+        nu: Number | None = None
+        G: Positive | None = None
+
+        @model_validator(mode="after")
+        def _consistent(self):
+            if (self.nu is None) == (self.G is None):
+                raise ValueError("give exactly one of Poisson's ratio 'nu' or shear modulus 'G' (Pa)")
+            if self.nu is not None and not -1.0 < self.nu <= 0.5:
+                raise ValueError(f"Poisson's ratio 'nu' must be in (-1, 0.5], got {self.nu:g}")
+            need = SECTION_DIMS[self.section]
+            given = [d for dims in SECTION_DIMS.values() for d in dims if getattr(self, d) is not None]
+            missing = [d for d in need if d not in given]
+            extra = [d for d in given if d not in need]
+            if missing or extra:
+                raise ValueError(
+                    f"section '{self.section}' takes {' and '.join(need)} (m)"
+                    + (f"; missing {', '.join(missing)}" if missing else "")
+                    + (f"; does not take {', '.join(extra)}" if extra else "")
+                )
+            if self.section == "tube" and 2.0 * self.wall > self.outer_diameter:
+                raise ValueError(f"tube wall {self.wall:g} m is thicker than half the diameter {self.outer_diameter:g} m")
+            return self
+
+    class LinkSpec(_Strict):
+        """``links.<link>``: a link spring at the link tip, from a beam or a stiffness matrix."""
+
+        beam: BeamSpec | None = None
+        stiffness: list[list[Number]] | None = None
+        dofs: Components = list(COMPONENTS)  # noqa: RUF012 - a pydantic field default (copied per instance)
+        rest: list[Number] | None = None
+
+        @model_validator(mode="after")
+        def _consistent(self):
+            if (self.beam is None) == (self.stiffness is None):
+                raise ValueError("give exactly one of 'beam' or 'stiffness'")
+            if self.rest is not None and len(self.rest) != len(self.dofs):
+                raise ValueError(f"'rest' has {len(self.rest)} values for {len(self.dofs)} dofs {' '.join(self.dofs)}")
+            return self
+
+    class SpringSpec(_Strict):
+        """The whole specification (keys documented in :mod:`vjm_pin.model.generator`)."""
+
+        name: Name | None = None
+        frame: Name | None = None
+        task: Components | None = None
+        actuators: dict[Name, Positive | None] | None = None
+        passive: list[Name] | None = None
+        positions: dict[Name, Number] | None = None
+        links: dict[Name, LinkSpec] | None = None
+        subdivide: PositiveInt | None = None
+
+    names = dict(locals())
+    _SCHEMA.update({k: names[k] for k in _SCHEMA_NAMES})
+    return _SCHEMA
 
 
-class BeamSpec(_Strict):
-    """``links.<link>.beam``: a link as a cantilever beam (:mod:`vjm_pin.model.beam`); SI units."""
-
-    length: Positive | None = None
-    section: Literal["rectangle", "circle", "tube"]
-    a: Positive | None = None
-    b: Positive | None = None
-    diameter: Positive | None = None
-    outer_diameter: Positive | None = None
-    wall: Positive | None = None
-    E: Positive
-    nu: Number | None = None
-    G: Positive | None = None
-
-    @model_validator(mode="after")
-    def _consistent(self):
-        if (self.nu is None) == (self.G is None):
-            raise ValueError("give exactly one of Poisson's ratio 'nu' or shear modulus 'G' (Pa)")
-        if self.nu is not None and not -1.0 < self.nu <= 0.5:
-            raise ValueError(f"Poisson's ratio 'nu' must be in (-1, 0.5], got {self.nu:g}")
-        need = SECTION_DIMS[self.section]
-        given = [d for dims in SECTION_DIMS.values() for d in dims if getattr(self, d) is not None]
-        missing = [d for d in need if d not in given]
-        extra = [d for d in given if d not in need]
-        if missing or extra:
-            raise ValueError(
-                f"section '{self.section}' takes {' and '.join(need)} (m)"
-                + (f"; missing {', '.join(missing)}" if missing else "")
-                + (f"; does not take {', '.join(extra)}" if extra else "")
-            )
-        if self.section == "tube" and 2.0 * self.wall > self.outer_diameter:
-            raise ValueError(f"tube wall {self.wall:g} m is thicker than half the diameter {self.outer_diameter:g} m")
-        return self
-
-
-class LinkSpec(_Strict):
-    """``links.<link>``: a link spring at the link tip, from a beam or a stiffness matrix."""
-
-    beam: BeamSpec | None = None
-    stiffness: list[list[Number]] | None = None
-    dofs: Components = list(COMPONENTS)
-    rest: list[Number] | None = None
-
-    @model_validator(mode="after")
-    def _consistent(self):
-        if (self.beam is None) == (self.stiffness is None):
-            raise ValueError("give exactly one of 'beam' or 'stiffness'")
-        if self.rest is not None and len(self.rest) != len(self.dofs):
-            raise ValueError(f"'rest' has {len(self.rest)} values for {len(self.dofs)} dofs {' '.join(self.dofs)}")
-        return self
-
-
-class SpringSpec(_Strict):
-    """The whole specification (keys documented in :mod:`vjm_pin.model.generator`)."""
-
-    name: Name | None = None
-    frame: Name | None = None
-    task: Components | None = None
-    actuators: dict[Name, Positive | None] | None = None
-    passive: list[Name] | None = None
-    positions: dict[Name, Number] | None = None
-    links: dict[Name, LinkSpec] | None = None
-    subdivide: PositiveInt | None = None
-
-
-#: The top-level keys of a spring specification.
-SPEC_KEYS = tuple(SpringSpec.model_fields)
+def __getattr__(name: str):
+    if name in _SCHEMA_NAMES:
+        return _schema()[name]
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def _known_keys(loc: tuple) -> list[str]:
     """Keys allowed in the mapping at ``loc`` (the location of an unknown key)."""
     parent = loc[:-1]
     if len(parent) == 2 and parent[0] == "links":
-        return list(LinkSpec.model_fields)
+        return list(LINK_KEYS)
     if len(parent) == 3 and parent[0] == "links" and parent[2] == "beam":
-        return list(BeamSpec.model_fields)
-    return list(SpringSpec.model_fields)
+        return list(BEAM_KEYS)
+    return list(SPEC_KEYS)
 
 
 def _path(loc: tuple) -> str:
@@ -285,6 +314,76 @@ def _read_file(p: Path) -> str:
         ) from None
 
 
+def _fast_items(d: Any, value_check) -> dict | None:
+    """A mapping of names to checked values, or None when not a plain dict of non-empty str keys."""
+    if type(d) is not dict:
+        return None
+    out = {}
+    for k, v in d.items():
+        if type(k) is not str or not k:
+            return None
+        out[k] = value_check(v)
+    return out
+
+
+def _fast_number(v: Any, positive: bool = False) -> float:
+    if type(v) not in (int, float):  # strings, numpy scalars, booleans: the pydantic path
+        raise ValueError
+    return _number(v, positive=positive)
+
+
+def _fast_spec(data: dict) -> dict | None:
+    """The result of :func:`read_spec` for a plain, valid document without ``links``
+    entries, without pydantic; None for anything else (the pydantic schema then decides and
+    reports). Accepts only exact ``dict``/``list``/``str``/``int``/``float`` values and runs the
+    schema's own validators (:func:`_number`, :func:`_name`, :func:`_components`,
+    :func:`_positive_int`), so it returns what ``SpringSpec.model_validate(data).model_dump(
+    exclude_unset=True)`` returns (``tests/test_shared_data.py`` compares the two)."""
+    if type(data) is not dict or any(k not in SPEC_KEYS for k in data):
+        return None
+    try:
+        out: dict[str, Any] = {}
+        for key in SPEC_KEYS:
+            if key not in data:
+                continue
+            v = data[key]
+            if v is None:
+                out[key] = None
+            elif key in ("name", "frame"):
+                if type(v) is not str:
+                    return None
+                out[key] = _name(v)
+            elif key == "task":
+                if type(v) not in (str, list) or (type(v) is list and any(type(c) is not str for c in v)):
+                    return None
+                out[key] = _components(v)
+            elif key == "actuators":
+                r = _fast_items(v, lambda a: None if a is None else _fast_number(a, True))
+                if r is None:
+                    return None
+                out[key] = r
+            elif key == "positions":
+                r = _fast_items(v, _fast_number)
+                if r is None:
+                    return None
+                out[key] = r
+            elif key == "passive":
+                if type(v) is not list or any(type(n) is not str for n in v):
+                    return None
+                out[key] = [_name(n) for n in v]
+            elif key == "links":
+                if type(v) is not dict or v:  # link springs: the pydantic path
+                    return None
+                out[key] = {}
+            else:  # subdivide
+                if type(v) is not int:
+                    return None
+                out[key] = _positive_int(v)
+        return out
+    except ValueError:
+        return None
+
+
 def read_spec(source, *, require_frame: bool = True) -> dict:
     """Read and validate a spring specification.
 
@@ -318,9 +417,15 @@ def read_spec(source, *, require_frame: bool = True) -> dict:
         raise SpecProblems(label, [f"empty document: expected a mapping with keys {', '.join(SPEC_KEYS)}"])
     if not isinstance(data, dict):
         raise SpecProblems(label, [f"expected a mapping with keys {', '.join(SPEC_KEYS)}, got {_show(data)}"])
+    if not (require_frame and data.get("frame") is None):
+        fast = _fast_spec(data)
+        if fast is not None:
+            return fast
+    from pydantic import ValidationError
+
     problems: list[str] = []
     try:
-        spec = SpringSpec.model_validate(data)
+        spec = _schema()["SpringSpec"].model_validate(data)
     except ValidationError as e:
         errors = sorted(e.errors(), key=lambda err: _document_order(data, tuple(err["loc"])))
         problems = [_problem(err) for err in errors]

@@ -61,13 +61,18 @@ def evaluate_blocks(
     last = getattr(kin, "_blocks_last", None)
     if last is not None and last[0] is vm and last[1] == key:
         return last[2]
-    if state is None or state.hessian is None:
-        state = kin.evaluate(x, hessian=True)
     nt = len(vm.theta_idx)
     free = np.concatenate([vm.theta_idx, vm.q_idx])
     task = list(vm.task)
+    if getattr(kin, "uses_screw", False):  # the Hessian in screw form from J (kinematics.screw)
+        if state is None:
+            state = kin.evaluate(x, hessian=False)
+        hz = kin.psi_hessian(state, wrench, free)
+    else:
+        if state is None or state.hessian is None:
+            state = kin.evaluate(x, hessian=True)
+        hz = state.psi_hessian(wrench)[np.ix_(free, free)]  # (θ, q) order; the blocks are views
     jz = state.jacobian[task][:, free]
-    hz = state.psi_hessian(wrench)[np.ix_(free, free)]  # (θ, q) order; the blocks are views
     b = Blocks(
         J_theta=jz[:, :nt],
         J_q=jz[:, nt:],

@@ -5,9 +5,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import lapack as _lapack
 
 from vjm_pin.solver.blocks import Blocks
+from vjm_pin.solver.lapack import lapack as _lapack  # scipy's LAPACK without importing scipy.linalg
 
 #: Largest matrix order for which the hot paths call scipy's LAPACK directly (numpy.linalg's
 #: wrappers cost more than small factorisations). numpy and scipy load two different OpenBLAS

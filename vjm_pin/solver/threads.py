@@ -11,8 +11,8 @@ map worker) are therefore wrapped by :func:`one_blas_thread`: both pools are lim
 thread for the duration of the call and restored afterwards. Only the library's own calls
 are affected, not the user's environment or their other numpy work.
 
-The limit is taken once per outermost public call (entering costs ~30 µs through a cached
-``threadpoolctl.ThreadpoolController``); nested calls (``solve_wrench`` → ``solve_mixed`` →
+The limit is taken once per outermost public call (each library's ``set_num_threads`` through
+a cached ``threadpoolctl.ThreadpoolController``, restored on exit); nested calls (``solve_wrench`` → ``solve_mixed`` →
 ``solve``, a curve's many solves, a map chunk's poses) only count. The count is
 process-wide under a lock because a BLAS library's thread count is process-wide.
 """
@@ -40,6 +40,10 @@ def _blas_controller():
         try:
             from threadpoolctl import ThreadpoolController
 
+            from vjm_pin.solver.lapack import lapack
+
+            lapack.load()  # scipy's LAPACK (and its BLAS) first: the controller sees both pools
+
             _controller = ThreadpoolController().select(user_api="blas")
         except Exception:  # pragma: no cover - an exotic BLAS: run as the environment says
             _controller = False
@@ -52,7 +56,16 @@ def _enter() -> None:
         _depth += 1
         if _depth == 1:
             ctl = _blas_controller()
-            _limiter = ctl.limit(limits=1) if ctl is not None else None
+            # each library's thread count set directly (ThreadpoolController.limit builds info
+            # dicts at every call: twice the cost); restored by _exit
+            saved = []
+            if ctl is not None:
+                for lib in ctl.lib_controllers:
+                    n = lib.num_threads
+                    if n != 1:
+                        lib.set_num_threads(1)
+                        saved.append((lib, n))
+            _limiter = saved
 
 
 def _exit() -> None:
@@ -60,7 +73,8 @@ def _exit() -> None:
     with _lock:
         _depth -= 1
         if _depth == 0 and _limiter is not None:
-            _limiter.restore_original_limits()
+            for lib, n in _limiter:
+                lib.set_num_threads(n)
             _limiter = None
 
 

@@ -1,28 +1,7 @@
-"""Gravity and payload: dead loads on the links besides the end wrench (beyond the paper).
+"""Frozen copy of ``vjm_pin/loads.py`` (``solve_loaded``, the gravity/payload Newton path of
+open chains) as released before issue 13 deleted it: the "before" side of
+``scripts/benchmark.py``'s map section. Not part of the package; never edit it."""
 
-The paper loads the end frame only. Here every link ``i`` may also carry a dead force
-``f_i`` (N, world axes, constant) at a point ``c_i`` fixed in the link (its centre of mass):
-its own weight ``f_i = m_i g`` when ``gravity`` is on. A payload of mass ``m`` at the end
-frame origin is the end force ``(0, 0, −m g)``: it is simply added to the end wrench.
-
-Extension of eq. (5). With ``G(x) = Σ_i J_iᵀ f_i`` (J_i: the (3, n) world Jacobian of the
-point ``c_i``; ``G = −g(x)`` of Pinocchio's generalised gravity), the static equilibrium
-of the springs and passive joints under the end wrench ``F`` and the link loads is::
-
-    J_θᵀ F + G_θ(x) = K_θ (θ − θ₀),      J_qᵀ F + G_q(x) = 0.                (5')
-
-Extension of eq. (14)–(16) and (28). Differentiating (5') adds to the Hessian blocks of
-``Ψ = g(q, θ)ᵀF`` the derivative of the load term, ``H^G = ∂G/∂x = −∂g/∂x``
-(Pinocchio's ``computeGeneralizedGravityDerivatives``), split as H^G_θθ, H^G_θq, H^G_qθ,
-H^G_qq. The matrix of eq. (28) — hence K_C by eq. (30), (32), (33) and the stability
-test of eq. (23) — is evaluated with ``H + H^G``. ``H^G`` is symmetric (gravity has a
-potential ``V = −Σ m_i gᵀ c_i``, ``G = −∂V/∂x``, ``H^G = −∂²V/∂x²``).
-
-The wrench-driven solve (:func:`solve_loaded`) is Newton's method on (5') for models
-without perfect passive joints (robots with actuator and link springs): with passive
-joints the link weights generally need the end to be held, i.e. a prescribed deflection,
-which this module does not offer.
-"""
 
 from __future__ import annotations
 
@@ -31,16 +10,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 import pinocchio as pin
 
-from vjm_pin.exceptions import InputError, NoEquilibrium, VjmError
+from vjm_pin.exceptions import InputError, LoadError, NoEquilibrium
 from vjm_pin.kinematics.chain import Kinematics, deflection
 from vjm_pin.model.format import VjmModel
 
 #: Standard gravity (m/s²), ISO 80000-3.
 STANDARD_GRAVITY = 9.80665
-
-
-class LoadError(VjmError):
-    """Gravity or payload requested where it cannot be applied (bad mass, passive joints)."""
 
 
 @dataclass(frozen=True)

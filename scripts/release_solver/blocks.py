@@ -1,0 +1,91 @@
+"""The matrices of the paper evaluated at one configuration and wrench.
+
+``Blocks`` bundles what eq. (5)–(33) need: the spring and passive Jacobians restricted
+to the constrained task components, and the four blocks of the Hessian of
+``Ψ = g(q, θ)ᵀF`` (eq. 16).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .chain import Kinematics, KinematicState
+from vjm_pin.model.format import VjmModel
+
+
+@dataclass(frozen=True)
+class Blocks:
+    """Jacobians and Hessians at one loaded configuration.
+
+    Attributes:
+        J_theta: (m, nθ) Jacobian of the spring coordinates, task rows (m/rad, m/m, …).
+        J_q: (m, nq) Jacobian of the passive coordinates, task rows.
+        H_tt: (nθ, nθ) ``∂(J_θᵀF)/∂θ``  (N·m/rad …), eq. (16).
+        H_tq: (nθ, nq) ``∂(J_θᵀF)/∂q``.
+        H_qt: (nq, nθ) ``∂(J_qᵀF)/∂θ``.
+        H_qq: (nq, nq) ``∂(J_qᵀF)/∂q``.
+        K_theta: (nθ, nθ) spring stiffness.
+        state: The full :class:`~vjm_pin.kinematics.chain.KinematicState`.
+    """
+
+    J_theta: np.ndarray
+    J_q: np.ndarray
+    H_tt: np.ndarray
+    H_tq: np.ndarray
+    H_qt: np.ndarray
+    H_qq: np.ndarray
+    K_theta: np.ndarray
+    state: KinematicState
+
+
+def full_wrench(vm: VjmModel, f_task: np.ndarray) -> np.ndarray:
+    """6-D wrench with the task components set from ``f_task`` and zeros elsewhere."""
+    w = np.zeros(6)
+    w[list(vm.task)] = f_task
+    return w
+
+
+def evaluate_blocks(
+    vm: VjmModel, kin: Kinematics, x: np.ndarray, wrench: np.ndarray, state: KinematicState | None = None
+) -> Blocks:
+    """Evaluate :class:`Blocks` at configuration ``x`` (nq,) under the 6-D ``wrench`` (N, N·m).
+
+    The last result is kept on ``kin``: the same model, ``x`` and ``wrench`` (bit for bit)
+    return the same (read-only by convention) :class:`Blocks` — the stability check of an
+    equilibrium and the stiffness of a curve point share one evaluation."""
+    x = np.asarray(x, dtype=float)
+    wrench = np.asarray(wrench, dtype=float)
+    key = x.tobytes() + wrench.tobytes()
+    last = getattr(kin, "_blocks_last", None)
+    if last is not None and last[0] is vm and last[1] == key:
+        return last[2]
+    if state is None or state.hessian is None:
+        state = kin.evaluate(x, hessian=True)
+    nt = len(vm.theta_idx)
+    free = np.concatenate([vm.theta_idx, vm.q_idx])
+    task = list(vm.task)
+    jz = state.jacobian[task][:, free]
+    hz = state.psi_hessian(wrench)[np.ix_(free, free)]  # (θ, q) order; the blocks are views
+    b = Blocks(
+        J_theta=jz[:, :nt],
+        J_q=jz[:, nt:],
+        H_tt=hz[:nt, :nt],
+        H_tq=hz[:nt, nt:],
+        H_qt=hz[nt:, :nt],
+        H_qq=hz[nt:, nt:],
+        K_theta=vm.K_theta,
+        state=state,
+    )
+    remember_blocks(vm, kin, x, wrench, b)
+    return b
+
+
+def remember_blocks(vm: VjmModel, kin: Kinematics, x: np.ndarray, wrench: np.ndarray, b: Blocks) -> None:
+    """Make ``b`` (evaluated at ``x`` under the 6-D ``wrench`` by the caller, in the layout of
+    :func:`evaluate_blocks`) the kept result of ``kin`` for :func:`evaluate_blocks`."""
+    try:
+        kin._blocks_last = (vm, np.asarray(x, float).tobytes() + np.asarray(wrench, float).tobytes(), b)
+    except AttributeError:  # a kinematics object with __slots__: no cache
+        pass

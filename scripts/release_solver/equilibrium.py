@@ -1,0 +1,1608 @@
+"""Loaded static equilibrium (paper §4.1, eq. 5–11).
+
+For a prescribed end location ``t`` the unknowns are the wrench ``F`` and the
+configuration ``(q, θ)`` that satisfy eq. (5)::
+
+    J_θᵀ F = K_θ (θ − θ₀),    J_qᵀ F = 0,    t = g(q, θ).
+
+This is the stationarity (KKT) system of "minimise the spring energy
+E = ½(θ−θ₀)ᵀK_θ(θ−θ₀) subject to g(q, θ) = t", with ``F`` the Lagrange multiplier; a
+stable equilibrium is a constrained energy minimum (eq. 23).
+
+Two iterations are offered:
+
+``"fixed-point"`` — the paper's scheme (eq. 9–10), written in increments so that
+    orientation errors use ``log3``: ``[[J_θ K_θ⁻¹ J_θᵀ, J_q], [J_qᵀ, 0]] [F; Δq] =
+    [e + J_θ(θ − θ₀); 0]``, ``θ⁺ = θ₀ + K_θ⁻¹ J_θᵀ F``. It ignores the Hessians, converges
+    linearly far from buckling, stalls next to a bifurcation and is singular for a straight
+    chain of rigid links.
+``"newton"`` (default) — Newton's method on eq. (5); its Jacobian is the matrix of
+    eq. (28). When a stable branch is followed the reduced Hessian is shifted to be
+    positive definite (so the step descends the energy) and a step is only accepted if it
+    decreases the ℓ₁ merit ``E + ρ‖t − g‖₁`` or, when it is an unmodified Newton step,
+    the residual of eq. (5); an energy-increasing step is never taken.
+
+    Every Newton attempt first tries the plain local iteration (:meth:`EquilibriumSolver._fast_newton`):
+    unmodified Newton steps of eq. (28) from the start, without restoration, taken only
+    while the reduced Hessian is positive definite (stable branch followed) and the step
+    is within the step limit, and kept only if the residual of eq. (5) at least halves at
+    every step and the converged equilibrium is stable. These are exactly the steps the
+    safeguarded iteration accepts by its residual test; when any condition fails the
+    attempt restarts from the same start on the safeguarded path. A warm start from a
+    neighbouring equilibrium (curve tracing) usually converges in one or two such steps.
+
+Both are wrapped in continuation (``t_i = α_i t + (1−α_i) t₀``, eq. after 10) and
+perturbed restarts (small seeded random noise on ``(q, θ)``, §4.1) when an iteration
+stalls; an unstable equilibrium is left along its unstable eigenvectors first
+(:meth:`EquilibriumSolver._escape`). The result says which path was used.
+
+Every iterate's coordinates smaller than :data:`~vjm_pin.kinematics.chain.FLUSH_BELOW` (1e-150) are
+set to exactly zero (:func:`~vjm_pin.kinematics.chain.flush_tiny`): on a straight column they would
+otherwise converge to subnormal floats, which slow Pinocchio, without changing any result. The
+public calls run with one BLAS thread (:mod:`vjm_pin.solver.threads`).
+
+Mixed control (:meth:`EquilibriumSolver.solve_mixed`): each task component is *held*
+(deflection prescribed) or *loaded* (dead force/moment prescribed). The equilibrium is a
+stationary point of the total potential ``½(θ−θ₀)ᵀK_θ(θ−θ₀) − w_Lᵀ t_L`` subject to the held
+components, the multipliers being the reactions; Newton's method with the matrix
+``[[K − H(w), −J_Hᵀ], [J_H, 0]]`` (``w`` the total end wrench). Every component held is the
+problem above; every component loaded (:meth:`EquilibriumSolver.solve_wrench`) replaces the
+outer loop of eq. (11), which needed a regular K_C. Results carry two verdicts: ``stable``
+for the control as run, ``stable_end_held`` for eq. (23); :meth:`EquilibriumSolver.verify`
+checks a result (eq. 5 residual per unit, both verdicts, K_C against re-solved equilibria).
+
+Public API (stable; names as in the docstrings below)::
+
+    solver = EquilibriumSolver(vm, tol=1e-10, max_iter=60, restarts=8, seed=0)
+    solver.solve(deflection, *, target=None, x0=None, wrench0=None, raise_on_failure=True,
+                 fast_fail=False)                                  # all held
+    solver.solve_wrench(wrench, *, x0=None, raise_on_failure=True, fast_fail=False)  # all loaded
+    solver.solve_mixed(deflection=None, wrench=None, *, held, x0=None, wrench0=None,
+                       raise_on_failure=True, fast_fail=False)     # held: names or 0..5
+    solver.verify(result, *, method="eq30", rtol=1e-3)            # checked result or error
+    solver.components(spec) -> tuple of task component indices
+    EquilibriumResult: x, q, theta, wrench (6,), deflection (6,), position, rotation,
+        converged, iterations, residuals, energy, path, stability, held, stability_end_held,
+        warnings, checks; properties stable, stable_end_held.
+"""
+
+from __future__ import annotations
+
+import copy
+import inspect
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import pinocchio as pin
+from scipy.linalg import lapack as _lapack
+from scipy.linalg import solve_triangular as _solve_triangular
+
+from vjm_pin.exceptions import EquilibriumCheckError, InputError, NoEquilibrium, SingularStiffness
+from .chain import Kinematics, contract_hessian, deflection, displace, flush_tiny, pose_error
+from vjm_pin.model.format import VjmModel
+from .blocks import Blocks, evaluate_blocks, full_wrench, remember_blocks
+from .stability import (
+    RANK_TOL,
+    SCIPY_LAPACK_MAX_N,
+    STABILITY_TOL,
+    StabilityResult,
+    check_stability,
+    check_stability_held,
+    null_space,
+    reduced_matrix,
+    spectral_norm,
+)
+from vjm_pin.solver.stiffness import stiffness_from_blocks
+from vjm_pin.solver.threads import one_blas_thread
+
+METHODS = ("newton", "fixed-point")
+#: A converged iterate is polished by up to this many further Newton steps while the step
+#: (the error estimate, relative: rad, or m/L_c) exceeds :data:`POLISH_STEP`.
+POLISH_ITERATIONS = 3
+POLISH_STEP = 1e-12
+#: Margin (relative to max|K_θ|) below which the reduced Hessian of a Newton step is
+#: shifted to be positive definite when a stable branch is followed; of the order of the
+#: stability threshold (:data:`~vjm_pin.solver.stability.STABILITY_TOL`) so that a stable
+#: equilibrium next to a bifurcation (small positive eigenvalue) keeps quadratic Newton steps.
+SHIFT_TOL = 1e-10
+#: Warning of a deflection-driven result when only an unstable equilibrium was found.
+UNSTABLE_HELD_NOTE = (
+    "only an unstable equilibrium was found for this deflection (eq. 23 fails): restarts and "
+    "escapes along its unstable modes found no stable one"
+)
+#: Rotation-target iterations of a partial-rotation task (see ``EquilibriumSolver.solve``) and
+#: their tolerance on the held rotation-vector components (rad).
+ROTATION_TARGET_ITER = 200
+ROTATION_TARGET_TOL = 1e-12
+#: A held rotation component missed by more than this (rad) after the corrections is a failure.
+ROTATION_TARGET_FAIL = 1e-10
+#: Unstable modes pushed along, and the push amplitudes, when a deflection-driven solve
+#: converged to an unstable equilibrium (:meth:`EquilibriumSolver._escape`).
+ESCAPE_MODES = 2
+ESCAPE_AMPLITUDES = (1e-3, 1e-2, 1e-1)
+#: Iterations of the plain local Newton attempt of a load-controlled solve, and the budget of
+#: its energy-descent attempt in units of ``max_iter``.
+LOCAL_MAX_ITER = 12
+DESCENT_ITER_FACTOR = 8
+#: Tolerances of :meth:`EquilibriumSolver.verify`: K_C against re-solved equilibria
+#: (relative), and the static residual of eq. (5) per unit (relative to each row's scale).
+VERIFY_RTOL = 1e-3
+VERIFY_STATICS = 1e-8
+#: Names of the six task components, in order.
+COMPONENTS = ("x", "y", "z", "rx", "ry", "rz")
+
+
+@dataclass(frozen=True)
+class EquilibriumResult:
+    """A loaded equilibrium (eq. 5 under the control of :meth:`EquilibriumSolver.solve_mixed`).
+
+    Attributes:
+        x: (nq,) full configuration (m, rad), Pinocchio order.
+        q: (n_q,) perfect passive coordinates.
+        theta: (n_θ,) spring coordinates.
+        wrench: (6,) total external wrench applied to the end frame at equilibrium: force (N)
+            at the frame origin and moment (N·m), world axes. On held task components it is
+            the reaction (the Lagrange multiplier), on loaded ones the prescribed dead load;
+            zero for components outside the task.
+        deflection: (6,) end location minus the unloaded one: (m, world rotation vector rad,
+            ``log3(R R0ᵀ)``). Equal to the prescribed value in the held components.
+        position: (3,) end frame position (m). rotation: (3, 3) end frame orientation.
+        converged: Whether eq. (5) holds to the tolerance.
+        iterations: Total iterations over all attempts.
+        residuals: ``position`` (m), ``orientation`` (rad), ``statics`` (max |eq. 5 static
+            residual|, N·m or N) at the returned configuration.
+        energy: Spring energy ½(θ−θ₀)ᵀK_θ(θ−θ₀) (J).
+        path: How it was found, e.g. ``"newton"``, ``"newton+continuation(4)"``,
+            ``"newton+restart(2)"``, ``"newton+escape(1)"``, ``"total-potential"``.
+        stability: :class:`StabilityResult` for the control as run: the Hessian of the total
+            potential restricted to the displacements that keep the *held* components fixed
+            (:func:`~vjm_pin.solver.stability.check_stability_held`); with every task
+            component held this is eq. (23). None if not evaluated.
+        held: Task component indices (0..5 = x y z rx ry rz) that were held (deflection
+            prescribed); the other task components were loaded (dead wrench prescribed).
+            None means every task component (the deflection-driven problem).
+        stability_end_held: :class:`StabilityResult` of eq. (23) alone (every task component
+            held at the equilibrium reached); the same object as ``stability`` when every
+            component was held.
+        warnings: Plain-language notes, e.g. that only an unstable equilibrium was found.
+        checks: Filled by :meth:`EquilibriumSolver.verify`: the measured residuals per unit,
+            the recomputed verdicts and the K_C-against-branch error; empty when not checked.
+    """
+
+    x: np.ndarray
+    q: np.ndarray
+    theta: np.ndarray
+    wrench: np.ndarray
+    deflection: np.ndarray
+    position: np.ndarray
+    rotation: np.ndarray
+    converged: bool
+    iterations: int
+    residuals: dict = field(default_factory=dict)
+    energy: float = 0.0
+    path: str = ""
+    stability: StabilityResult | None = None
+    held: tuple[int, ...] | None = None
+    stability_end_held: StabilityResult | None = None
+    warnings: tuple[str, ...] = ()
+    checks: dict = field(default_factory=dict)
+
+    @property
+    def stable(self) -> bool | None:
+        """Verdict for the control as run (see ``stability``); None if not evaluated."""
+        return None if self.stability is None else self.stability.stable
+
+    @property
+    def stable_end_held(self) -> bool | None:
+        """Eq. (23) alone: stable with the end held in every task component at this
+        configuration; None if not evaluated."""
+        st = self.stability_end_held if self.stability_end_held is not None else (
+            self.stability if self.held is None else None
+        )
+        return None if st is None else st.stable
+
+    def residual(self) -> float:
+        """Largest of the three residual norms (mixed units; 0 at an exact equilibrium)."""
+        return float(max(self.residuals.values())) if self.residuals else float("nan")
+
+
+def _singular_values(a: np.ndarray) -> np.ndarray:
+    """Singular values of a small matrix (LAPACK ``gesdd`` directly; numpy's wrapper costs more)."""
+    if a.size:
+        _, sv, _, info = _lapack.dgesdd(a, compute_uv=0)
+        if not info:
+            return sv
+    return np.linalg.svd(a, compute_uv=False)
+
+
+def _as_target(vm, kin, p0, r0, deflection_=None, target=None):
+    if (deflection_ is None) == (target is None):
+        raise InputError("give exactly one of a deflection or a target pose")
+    if deflection_ is not None:
+        d = np.asarray(deflection_, dtype=float).ravel()
+        if d.size == 3:
+            d = np.concatenate([d, np.zeros(3)])
+        if d.size != 6:
+            raise InputError(f"deflection must have 3 or 6 components (m, rad), got {d.size}")
+        if not np.all(np.isfinite(d)):
+            raise InputError(f"deflection contains NaN or infinite values: {d.tolist()}")
+        free = [i for i in range(6) if i not in vm.task and d[i] != 0.0]
+        if free:
+            names = ["x", "y", "z", "rx", "ry", "rz"]
+            raise InputError(
+                f"deflection components {[names[i] for i in free]} are not constrained by this model "
+                f"(task is {vm.task_names}): they cannot be prescribed"
+            )
+        return displace(p0, r0, d)
+    p, r = target
+    p = np.asarray(p, float)
+    r = np.asarray(r, float)
+    if p.shape != (3,) or r.shape != (3, 3) or not (np.all(np.isfinite(p)) and np.all(np.isfinite(r))):
+        raise InputError("target must be a finite position (3,) and rotation (3, 3)")
+    return p, r
+
+
+#: Allowed range of the relative tolerance ``tol`` of :class:`EquilibriumSolver`: above
+#: 1e-4 a "converged" end could be 0.01 % of the chain size off its target and the static
+#: residual 0.01 % of the spring torques (a zero deflection would pass for any load);
+#: below 1e-15 rounding alone exceeds it.
+TOL_RANGE = (1e-15, 1e-4)
+#: Iteration / restart / perturbation limits accepted by :class:`EquilibriumSolver`.
+MAX_ITER_RANGE = (1, 100_000)
+RESTARTS_RANGE = (0, 1000)
+PERTURBATION_RANGE = (1e-12, 1.0)
+
+
+def _check_options(*, method, tol, max_iter, restarts, perturbation, seed, follow_stable, **_):
+    """:class:`InputError` naming the first out-of-range solver option and its allowed range."""
+    if not isinstance(method, str) or method not in METHODS:
+        raise InputError(f"method must be one of {', '.join(METHODS)}; got {method!r}")
+
+    def number(name, v, lo, hi, integer=False):
+        kind = "an integer" if integer else "a number"
+        ok = isinstance(v, (int, np.integer)) if integer else isinstance(v, (int, float, np.integer, np.floating))
+        if isinstance(v, bool) or not ok or not math.isfinite(float(v)) or not lo <= v <= hi:
+            raise InputError(f"{name} must be {kind} in [{lo:g}, {hi:g}]; got {v!r}")
+
+    number("tol", tol, *TOL_RANGE)
+    number("max_iter", max_iter, *MAX_ITER_RANGE, integer=True)
+    number("restarts", restarts, *RESTARTS_RANGE, integer=True)
+    number("perturbation", perturbation, *PERTURBATION_RANGE)
+    number("seed", seed, 0, 2**63 - 1, integer=True)
+    if not isinstance(follow_stable, (bool, np.bool_)):
+        raise InputError(f"follow_stable must be True or False; got {follow_stable!r}")
+
+
+class EquilibriumSolver:
+    """Solves eq. (5) for one model; keeps a Pinocchio ``Data`` and the reference pose.
+
+    Args:
+        vm: The model.
+        method: ``"newton"`` (default) or ``"fixed-point"`` (eq. 10).
+        tol: Relative tolerance in :data:`TOL_RANGE` (1e-15…1e-4): position error ≤ tol·L_c
+            (L_c = size of the chain), orientation error ≤ tol rad, static residual ≤
+            tol·max(|K_θ(θ−θ₀)|, 1e-6·|K_θ|).
+        max_iter: Iterations per attempt (1…100000).
+        restarts: Perturbed restarts after a stall or an unstable result (0…1000).
+        perturbation: Size of the restart noise (rad; ×L_c·1e-3 for prismatic coordinates),
+            1e-12…1.
+        seed: Seed of the restart noise, a non-negative integer (results are reproducible).
+
+    Raises:
+        InputError: an option out of its range (the message names it and the range).
+        follow_stable: Prefer stable equilibria: inertia-corrected Newton steps and restarts
+            when the converged equilibrium is unstable (eq. 23).
+    """
+
+    def __init__(
+        self,
+        vm: VjmModel,
+        *,
+        method: str = "newton",
+        tol: float = 1e-10,
+        max_iter: int = 60,
+        restarts: int = 8,
+        perturbation: float = 1e-3,
+        seed: int = 0,
+        follow_stable: bool = True,
+        _kin: Kinematics | None = None,
+    ):
+        _check_options(method=method, tol=tol, max_iter=max_iter, restarts=restarts,
+                       perturbation=perturbation, seed=seed, follow_stable=follow_stable)
+        self.vm = vm
+        # ``_kin`` (private): a Kinematics of this model and frame to share (one pin.Data per
+        # map worker instead of one per pose); same results, it only holds Pinocchio's workspace
+        if _kin is not None and (_kin.model is not vm.model or _kin.frame_id != vm.frame_id):
+            raise InputError("_kin must be a Kinematics of the same pin.Model and end frame")
+        self.kin = _kin if _kin is not None else Kinematics(vm.model, vm.frame_id)
+        self.method = method
+        self.tol = tol
+        self.max_iter = max_iter
+        self.restarts = restarts
+        self.perturbation = perturbation
+        self.seed = seed
+        self.follow_stable = follow_stable
+        self.max_step = 0.3
+        self.p0, self.r0 = self.kin.placement(vm.reference)
+        self.task = list(vm.task)
+        self.free = np.concatenate([vm.theta_idx, vm.q_idx]).astype(int)
+        self.nt = vm.n_theta
+        pin.forwardKinematics(vm.model, self.kin.data, vm.reference)
+        pts = [m.translation for m in self.kin.data.oMi[1:]] + [self.p0]
+        self.length_scale = max(max(np.linalg.norm(p - self.p0) for p in pts), 1e-3)
+        prism = np.array([vm.model.joints[i + 1].shortname().startswith("JointModelP") for i in range(vm.model.nv)])
+        self.var_scale = np.where(prism[self.free], self.length_scale, 1.0)
+        self.kscale = float(np.abs(vm.K_theta).max())
+        self.Kinv = np.linalg.inv(vm.K_theta)
+        metric = np.diag(1e-6 * self.kscale / self.var_scale**2)
+        metric[: self.nt, : self.nt] += vm.K_theta
+        self.Minv = np.linalg.inv(metric)
+        # per-task-row scale of pose errors (m rows by L_c, rad rows by 1), and the row groups
+        self._err_scale = np.where(np.array(self.task) < 3, self.length_scale, 1.0)
+        self._rows_p = [i for i, t in enumerate(self.task) if t < 3]
+        self._rows_r = [i for i, t in enumerate(self.task) if t >= 3]
+        # the fast local Newton path: (θ, q)-ordered gathers of J and H by precomputed indices
+        nv = vm.model.nv
+        self._kz = np.zeros((len(self.free),) * 2)
+        self._kz[: self.nt, : self.nt] = vm.K_theta
+        self._hidx = (self.free[:, None] * nv + self.free[None, :]).ravel()
+        self._all_task = self.task == [0, 1, 2, 3, 4, 5]
+        self._ip = np.array(self._rows_p, int)
+        self._ir = np.array(self._rows_r, int)
+        self._triu = np.triu(np.ones((len(self.task),) * 2))
+        t = self.task
+        contiguous = bool(t) and t == list(range(t[0], t[-1] + 1))
+        self._task_rows = slice(t[0], t[-1] + 1) if contiguous else np.array(t, int)
+        self._fast_max_iter = 8
+        self._fast_cache: tuple[bytes, dict, StabilityResult | None] | None = None
+        self._fast_fact: tuple | None = None  # factorisation at the last fast-path equilibrium
+
+    def _sibling(self, **options) -> EquilibriumSolver:
+        """A solver of the same model with the given options (the defaults of ``__init__``
+        for the others) that shares this one's :class:`Kinematics`: creating a ``pin.Data``
+        costs seconds for finely subdivided models. Use in the same thread only."""
+        params = inspect.signature(EquilibriumSolver.__init__).parameters
+        opts = {k: p.default for k, p in params.items() if k not in ("self", "vm") and not k.startswith("_")}
+        opts.update(options)
+        _check_options(**opts)
+        new = copy.copy(self)
+        for k, v in opts.items():
+            setattr(new, k, v)
+        new.max_step = 0.3
+        new._fast_cache = None
+        new._fast_fact = None
+        return new
+
+    # ----------------------------------------------------------------- helpers
+    def energy(self, x: np.ndarray) -> float:
+        d = x[self.vm.theta_idx] - self.vm.theta0
+        return 0.5 * float(d @ self.vm.K_theta @ d)
+
+    def _residuals(self, x, f, state, p_t, r_t):
+        vm = self.vm
+        e = pose_error(p_t, r_t, state.position, state.rotation)[self.task]
+        jz = state.jacobian[self.task][:, self.free]
+        tau = vm.K_theta @ (x[vm.theta_idx] - vm.theta0)
+        grad = np.concatenate([tau, np.zeros(vm.n_q)])
+        r = grad - jz.T @ f
+        tp, tr = self._rows_p, self._rows_r
+        res = {
+            "position": float(np.abs(e[tp]).max()) if tp else 0.0,
+            "orientation": float(np.abs(e[tr]).max()) if tr else 0.0,
+            "statics": float(np.abs(r).max()) if r.size else 0.0,
+        }
+        stat_scale = max(float(np.abs(tau).max()) if tau.size else 0.0, 1e-6 * self.kscale)
+        ok = (
+            res["position"] <= self.tol * self.length_scale
+            and res["orientation"] <= self.tol
+            and res["statics"] <= self.tol * stat_scale
+        )
+        return e, jz, grad, r, res, ok
+
+    def _kkt_norm(self, e, r):
+        return float(np.linalg.norm(e / self._err_scale) + np.linalg.norm(r) / max(self.kscale, 1e-300))
+
+    # ----------------------------------------------------------------- iterations
+    def _iterate(self, x, f, p_t, r_t, max_iter):
+        """One attempt from (x, f); returns (x, f, iterations, converged, state)."""
+        if self.method == "fixed-point":
+            return self._fixed_point(x, f, p_t, r_t, max_iter)
+        return self._newton(x, f, p_t, r_t, max_iter)
+
+    def _fast_newton(self, x, p_t, r_t):
+        """Plain local Newton on eq. (5) from ``x``; None when it must give way to the
+        safeguarded iteration (see the module docstring).
+
+        Each iteration: ``J`` and the Hessian at ``x`` (one Pinocchio evaluation), the
+        complete QR ``Jᵀ = [Y Z] [R; 0]`` (``Z``: null space of eq. 20–21; the singular
+        values of ``R`` are those of ``J``, checked against :data:`RANK_TOL`), the
+        least-squares multiplier ``F = R⁻¹ Yᵀ ∇E`` (as the safeguarded path), the
+        residual test of :meth:`_residuals`, then the Newton step of eq. (28),
+        ``[[W, −Jᵀ], [J, 0]] [δx; δF] = [−r; e]`` with ``W = K − H(F)``, solved in the
+        null-space form ``Rᵀ p_Y = e``, ``(ZᵀWZ) p_Z = −Zᵀ(r + W Y p_Y)``. The positive
+        definiteness of ``ZᵀWZ`` (symmetric part, margin ``1e-8·max|K_θ|``) is the
+        condition of the safeguarded path for an unmodified step; at convergence its
+        negative is the matrix of eq. (23), so the stability verdict comes for free.
+
+        Returns (x, f, iterations, state) with the verdict cached for :meth:`_result`.
+        """
+        vm, kin, kz, task, free = self.vm, self.kin, self._kz, self.task, self.free
+        ti, th0, kt, nt = vm.theta_idx, vm.theta0, vm.K_theta, self.nt
+        m, n = len(task), len(free)
+        if m == 0 or m >= n:
+            return None
+        tol = self.tol
+        tol_p = tol * self.length_scale
+        kscale = max(self.kscale, 1e-300)
+        stat_floor = 1e-6 * self.kscale
+        shift = SHIFT_TOL * self.kscale
+        diag = np.arange(n - m) * (n - m + 1)
+        ip, ir, escale = self._ip, self._ir, self._err_scale
+        rot = ir.size > 0  # log3 only when orientation rows are constrained
+        rows = None if self._all_task else self._task_rows
+        pt = np.asarray(p_t, float)
+        rt = np.asarray(r_t, float)
+        kkt_prev = np.inf
+        x = flush_tiny(np.array(x, dtype=float))
+        f6 = np.zeros(6)
+        tau = np.zeros(n)
+        qfull = np.zeros((n, n), order="F")
+        # LAPACK directly for small models: numpy.linalg's wrappers cost more than these small
+        # factorisations; numpy.linalg for large ones (see SCIPY_LAPACK_MAX_N)
+        big = n > SCIPY_LAPACK_MAX_N
+        polish = 0
+        for it in range(self._fast_max_iter + 1 + POLISH_ITERATIONS):
+            key = x.tobytes()
+            fact = self._fast_fact
+            if fact is not None and fact[0] == key and fact[1] is self.kin:
+                # a warm start from the equilibrium this solver just found: its J, QR,
+                # multiplier and Hessian depend on x only (the target does not enter them)
+                st, jac, qf, rr, f, r, tau, hz = fact[2:]
+                y, z = qf[:, :m], qf[:, m:]
+                f6[self._task_rows] = f
+            else:
+                st = kin.evaluate(x)
+                if st.hessian is None:
+                    return None
+                jac = st.jacobian if rows is None else st.jacobian[rows]
+                jac = jac.take(free, axis=1)
+                tau = np.zeros(n)
+                tau[:nt] = kt @ (x.take(ti) - th0)  # ∇E: K_θ(θ − θ₀), 0 for q
+                # complete QR of Jᵀ (n × m): Q = [Y Z], R = upper triangle of qr[:m]
+                if big:
+                    qf, rf = np.linalg.qr(jac.T, mode="complete")
+                    rr, info, info2 = rf[:m], 0, 0
+                else:
+                    qr, tq, _, info = _lapack.dgeqrf(jac.T)
+                    qfull[:, :m] = qr
+                    qf, _, info2 = _lapack.dorgqr(qfull, tq)
+                    rr = qr[:m]  # R is its upper triangle (dtrtrs reads only that)
+                if info or info2:
+                    return None
+                # the rank test (RANK_TOL, as null_space) is made where the result is used: at
+                # convergence; before it a rank-deficient J gives a non-finite or clipped step
+                y, z = qf[:, :m], qf[:, m:]
+                f, info = _lapack.dtrtrs(rr, y.T @ tau)  # least-squares multiplier
+                if info:
+                    return None
+                r = tau - jac.T @ f
+                f6[self._task_rows] = f
+                hz = contract_hessian(st.hessian, f6).take(self._hidx).reshape(n, n)
+            if rot:
+                e = np.concatenate([pt - st.position, pin.log3(rt @ st.rotation.T)])
+                if rows is not None:
+                    e = e[rows]
+            else:
+                e = (pt - st.position)[rows]
+            ae = np.abs(e)
+            if rot:
+                ep = ae[ip].max() if ip.size else 0.0
+                er = ae[ir].max()
+            else:
+                ep, er = ae.max(), 0.0
+            rs = np.abs(r).max()
+            es = e / escale
+            kkt = math.sqrt(es @ es) + math.sqrt(r @ r) / kscale
+            # the test of _residuals, with the end placed as accurately as the safeguarded
+            # path's restoration places it (0.01·tol): wrench-driven loops (eq. 11) rely on it
+            converged = ep <= 0.01 * tol_p and er <= 0.01 * tol and rs <= tol * max(np.abs(tau).max(), stat_floor)
+            if converged and polish < POLISH_ITERATIONS:
+                # the residual test alone misses the error along a soft mode next to a
+                # bifurcation (error = residual / small eigenvalue): the Newton step is the
+                # error estimate; polish while it is not negligible
+                step = self._fast_step(kz, hz, z, y, rr, e, r, big)
+                if step is not None and np.abs(step / self.var_scale).max() > POLISH_STEP:
+                    polish += 1
+                    x = x.copy()
+                    x[free] += step
+                    flush_tiny(x)
+                    kkt_prev = np.inf
+                    continue
+            if converged:
+                _, sv, _, info = _lapack.dgesdd(rr * self._triu, compute_uv=0)
+                if info or not sv[-1] > RANK_TOL * sv[0]:  # descending
+                    return None
+                res = {"position": float(ep), "orientation": float(er), "statics": float(rs)}
+                # eq. (23) in the basis Z (its eigenvalues do not depend on the basis)
+                red = z.T @ (hz - kz) @ z
+                if big:
+                    ev = np.linalg.eigvalsh(0.5 * (red + red.T))
+                else:
+                    ev, _, info = _lapack.dsyevd(0.5 * (red + red.T), compute_v=0)
+                    if info:
+                        return None
+                thr = STABILITY_TOL * (spectral_norm(kt) if kt.size else 1.0)
+                stab = StabilityResult(bool(ev.size == 0 or ev.max() < -thr), ev, n - m, float(thr))
+                if self.follow_stable and not stab.stable:
+                    self._fast_its = it
+                    return None
+                self._fast_cache = (key + f6.tobytes() + pt.tobytes() + rt.tobytes(), res, stab)
+                self._fast_fact = (key, kin, st, jac, qf, rr, f, r, tau, hz)
+                # the Blocks at this equilibrium, as evaluate_blocks would build them (the
+                # stiffness of a curve point is evaluated here next)
+                blocks = Blocks(jac[:, :nt], jac[:, nt:], hz[:nt, :nt], hz[:nt, nt:], hz[nt:, :nt], hz[nt:, nt:], kt, st)
+                remember_blocks(vm, kin, x, f6, blocks)
+                return x, f, it, st
+            self._fast_its = it
+            if it and not kkt < 0.5 * kkt_prev or it - polish >= self._fast_max_iter:
+                return None
+            w = kz - hz
+            red = z.T @ w @ z
+            if self.follow_stable:  # ½(red + redᵀ) − shift·I ≻ 0
+                sym = red + red.T
+                sym.flat[diag] -= 2.0 * shift
+                if big:
+                    try:
+                        np.linalg.cholesky(sym)
+                    except np.linalg.LinAlgError:
+                        return None
+                elif _lapack.dpotrf(sym, overwrite_a=1)[1]:
+                    return None  # not positive definite: the safeguarded path shifts it
+            py, info = _lapack.dtrtrs(rr, e, trans=1)  # Rᵀ p_Y = e
+            dy = y @ py
+            if big:
+                try:
+                    pz, info2 = np.linalg.solve(red, z.T @ (r + w @ dy)), 0
+                except np.linalg.LinAlgError:
+                    return None
+            else:
+                _, _, pz, info2 = _lapack.dgesv(red, z.T @ (r + w @ dy), overwrite_b=1)
+            if info or info2:
+                return None
+            dx = dy - z @ pz
+            smax = np.abs(dx / self.var_scale).max()
+            if not smax <= self.max_step:  # also catches NaN
+                return None
+            x = x.copy()
+            x[free] += dx
+            flush_tiny(x)
+            kkt_prev = kkt
+        return None
+
+    def _fast_step(self, kz, hz, z, y, rr, e, r, big):
+        """The unmodified Newton step of :meth:`_fast_newton` (None if singular)."""
+        w = kz - hz
+        red = z.T @ w @ z
+        py, info = _lapack.dtrtrs(rr, e, trans=1)
+        if info:
+            return None
+        dy = y @ py
+        try:
+            pz = np.linalg.solve(red, z.T @ (r + w @ dy))
+        except np.linalg.LinAlgError:
+            return None
+        dx = dy - z @ pz
+        return dx if np.all(np.isfinite(dx)) else None
+
+    def _newton(self, x, f, p_t, r_t, max_iter):
+        """Newton on eq. (5) (matrix of eq. 28), kept on the constraint ``g = t``.
+
+        Every iterate is first made geometrically feasible by least-energy restoration
+        steps (:meth:`_restore`); then the spring energy itself is the merit function. When a
+        stable branch is followed the reduced Hessian is shifted to be positive definite, so
+        the step descends the energy, and a step is accepted only if the energy does not
+        increase (Armijo), or, for an unmodified Newton step, if the residual of eq. (5)
+        falls. With ``follow_stable=False`` full Newton steps are taken (unstable branches).
+        The plain local iteration (:meth:`_fast_newton`) is tried first.
+        """
+        self._fast_its = 0
+        fast = self._fast_newton(x, p_t, r_t)
+        if fast is not None:
+            xf, ff, itf, stf = fast
+            return xf, ff, itf, True, stf
+        spent = self._fast_its
+        x, f, it, ok, state = self._newton_safeguarded(x, f, p_t, r_t, max_iter)
+        if ok:  # polish (and cache the verdict) by the local iteration from the converged point
+            fast = self._fast_newton(x, p_t, r_t)
+            if fast is not None:
+                x, f, itp, state = fast
+                it += itp
+        return x, f, it + spent, ok, state
+
+    def _newton_safeguarded(self, x, f, p_t, r_t, max_iter):
+        vm = self.vm
+        kz = np.zeros((len(self.free), len(self.free)))
+        kz[: self.nt, : self.nt] = vm.K_theta
+        m = len(self.task)
+        n = len(self.free)
+        x, state, ok = self._restore(x.copy(), None, p_t, r_t, max_iter=40)
+        if not ok:
+            return x, f, 0, False, state
+        for it in range(max_iter + 1):
+            jz = state.jacobian[self.task][:, self.free]
+            tau = vm.K_theta @ (x[vm.theta_idx] - vm.theta0)
+            grad = np.concatenate([tau, np.zeros(vm.n_q)])
+            f = np.linalg.lstsq(jz.T, grad, rcond=None)[0]  # least-squares multiplier
+            e, jz, grad, r, res, ok = self._residuals(x, f, state, p_t, r_t)
+            if ok:
+                return x, f, it, True, state
+            if it == max_iter:
+                break
+            if state.hessian is None:  # restoration evaluates J only; the Hessian when needed
+                state = self.kin.evaluate(x)
+            h = state.psi_hessian(full_wrench(vm, f))[np.ix_(self.free, self.free)]
+            w = kz - h
+            modified = False
+            if self.follow_stable:
+                z = null_space(jz[:, : self.nt], jz[:, self.nt :])
+                if z.shape[1]:
+                    red = z.T @ w @ z
+                    lam = np.linalg.eigvalsh(0.5 * (red + red.T)).min()
+                    delta = SHIFT_TOL * self.kscale
+                    if lam < delta:
+                        w = w + (delta - lam + 1e-3 * abs(lam)) * np.eye(n)
+                        modified = True
+            a = np.zeros((n + m, n + m))
+            a[:n, :n] = w
+            a[:n, n:] = -jz.T
+            a[n:, :n] = jz
+            rhs = np.concatenate([-r, e])
+            try:
+                sol = np.linalg.solve(a, rhs)
+                if not np.all(np.isfinite(sol)):
+                    raise np.linalg.LinAlgError
+            except np.linalg.LinAlgError:
+                sol = np.linalg.lstsq(a, rhs, rcond=None)[0]
+            dz = sol[:n]
+            smax = np.abs(dz / self.var_scale).max() if n else 0.0
+            if smax > self.max_step:
+                dz = dz * (self.max_step / smax)
+                modified = True
+            e0 = self.energy(x)
+            slope = float(grad @ dz)
+            kkt0 = self._kkt_norm(e, r)
+            alpha = 1.0
+            accepted = False
+            for _ in range(30):
+                xn = x.copy()
+                xn[self.free] += alpha * dz
+                flush_tiny(xn)
+                xn, sn, feas = self._restore(xn, None, p_t, r_t)
+                if feas:
+                    en_ = self.energy(xn)
+                    if not self.follow_stable:
+                        accepted = True
+                    elif en_ <= e0 + 1e-4 * alpha * min(slope, 0.0) + 1e-14 * max(abs(e0), 1e-300):
+                        accepted = True
+                    elif alpha == 1.0 and not modified:
+                        tau_n = vm.K_theta @ (xn[vm.theta_idx] - vm.theta0)
+                        jn = sn.jacobian[self.task][:, self.free]
+                        gn = np.concatenate([tau_n, np.zeros(vm.n_q)])
+                        fn = np.linalg.lstsq(jn.T, gn, rcond=None)[0]
+                        e_n, _, _, r_n, _, _ = self._residuals(xn, fn, sn, p_t, r_t)
+                        accepted = self._kkt_norm(e_n, r_n) < 0.5 * kkt0
+                if accepted:
+                    break
+                alpha *= 0.5
+            if not accepted:
+                return x, f, it + 1, False, state
+            x, state = xn, sn
+        return x, f, max_iter, False, state
+
+    def _restore(self, x, state, p_t, r_t, max_iter: int = 12):
+        """Least-energy restoration of ``g(x) = t``: repeated steps ``δ = M⁻¹Jᵀ(J M⁻¹ Jᵀ)⁻¹ e``
+        with the metric ``M = diag(K_θ, 0) + ε·I`` (passive joints move first, as in the
+        fixed-point scheme of eq. 10). Returns (x, state, converged); ``state`` carries no
+        Hessian (callers evaluate it when they need it)."""
+        tol_p = self.tol * self.length_scale
+        for _ in range(max_iter + 1):
+            if state is None:
+                state = self.kin.evaluate(x, hessian=False)
+            e = pose_error(p_t, r_t, state.position, state.rotation)[self.task]
+            scaled = np.abs(e / self._err_scale).max() if e.size else 0.0
+            if scaled <= 0.01 * self.tol:
+                return x, state, True
+            jz = state.jacobian[self.task][:, self.free]
+            a = jz @ self.Minv @ jz.T
+            try:
+                delta = self.Minv @ jz.T @ np.linalg.solve(a, e)
+            except np.linalg.LinAlgError:
+                return x, state, False
+            if not np.all(np.isfinite(delta)):
+                return x, state, False
+            big = np.abs(delta / self.var_scale).max()
+            if big > self.max_step:  # damped (far from the constraint, e.g. a straight chain)
+                delta *= self.max_step / big
+            x = x.copy()
+            x[self.free] += delta
+            flush_tiny(x)
+            state = None
+        state = self.kin.evaluate(x, hessian=False)
+        e = pose_error(p_t, r_t, state.position, state.rotation)[self.task]
+        return x, state, bool(np.abs(e).max() <= max(tol_p, self.tol))
+
+    def _fixed_point(self, x, f, p_t, r_t, max_iter):
+        vm = self.vm
+        x = x.copy()
+        state = self.kin.evaluate(x, hessian=False)
+        for it in range(max_iter + 1):
+            e, jz, _, _, res, ok = self._residuals(x, f, state, p_t, r_t)
+            if ok and it > 0:
+                return x, f, it, True, self.kin.evaluate(x)
+            if it == max_iter:
+                break
+            jt, jq = jz[:, : self.nt], jz[:, self.nt :]
+            m, nq = jt.shape[0], jq.shape[1]
+            a = np.zeros((m + nq, m + nq))
+            a[:m, :m] = jt @ self.Kinv @ jt.T
+            a[:m, m:] = jq
+            a[m:, :m] = jq.T
+            theta = x[vm.theta_idx]
+            rhs = np.concatenate([e + jt @ (theta - vm.theta0), np.zeros(nq)])
+            try:
+                sol = np.linalg.solve(a, rhs)
+            except np.linalg.LinAlgError:
+                return x, f, it, False, self.kin.evaluate(x)
+            f = sol[:m]
+            x[vm.q_idx] += sol[m:]
+            x[vm.theta_idx] = vm.theta0 + self.Kinv @ jt.T @ f
+            flush_tiny(x)
+            if not np.all(np.isfinite(x)):
+                return x, f, it, False, self.kin.evaluate(np.nan_to_num(x))
+            state = self.kin.evaluate(x, hessian=False)
+        return x, f, max_iter, False, self.kin.evaluate(x)
+
+    # ----------------------------------------------------------------- public
+    def _result(self, x, f, iters, ok, state, p_t, r_t, path, with_stability=True) -> EquilibriumResult:
+        vm = self.vm
+        w6 = full_wrench(vm, f)
+        fc = self._fast_cache
+        if fc is not None and fc[0] == x.tobytes() + w6.tobytes() + p_t.tobytes() + r_t.tobytes():  # by _fast_newton
+            res, stab = dict(fc[1]), fc[2]
+        else:
+            _, _, _, _, res, _ = self._residuals(x, f, state, p_t, r_t)
+            stab = None
+        if not (with_stability and ok):
+            stab = None
+        elif stab is None:
+            stab = check_stability(evaluate_blocks(vm, self.kin, x, w6, state))
+        return self._pack(
+            x, w6, state, ok, iters, res, path, stab, stab, tuple(self.task),
+            () if stab is None or stab.stable else (UNSTABLE_HELD_NOTE,),
+        )
+
+    def _pack(self, x, w6, state, ok, iters, res, path, stab, end, held, warnings) -> EquilibriumResult:
+        """The :class:`EquilibriumResult` at configuration ``x`` (kinematic ``state``) under the
+        total end wrench ``w6``, shared by the all-held and the mixed-control solves."""
+        vm = self.vm
+        return EquilibriumResult(
+            x=x.copy(),
+            q=x[vm.q_idx].copy(),
+            theta=x[vm.theta_idx].copy(),
+            wrench=w6,
+            deflection=deflection(self.p0, self.r0, state.position, state.rotation),
+            position=state.position.copy(),
+            rotation=state.rotation.copy(),
+            converged=bool(ok),
+            iterations=int(iters),
+            residuals=res,
+            energy=self.energy(x),
+            path=path,
+            stability=stab,
+            held=held,
+            stability_end_held=end,
+            warnings=warnings,
+        )
+
+    def _solve_local(self, deflection, x0: np.ndarray) -> EquilibriumResult | None:
+        """The plain local Newton iteration alone (:meth:`_fast_newton`) from ``x0``: its
+        equilibrium when it converges to an acceptable one (stable when ``follow_stable``),
+        else None and the caller solves as usual. No safeguards, restarts or continuation:
+        for a predicted start (tangent predictor of :func:`~vjm_pin.analysis.curve.trace_curve`).
+        ``self._fast_its`` holds the iterations spent when it returns None."""
+        self._fast_its = 0
+        if self.method != "newton":
+            return None
+        p_t, r_t = _as_target(self.vm, self.kin, self.p0, self.r0, deflection, None)
+        out = self._fast_newton(np.asarray(x0, float), p_t, r_t)
+        if out is None:
+            return None
+        x, f, it, st = out
+        return self._result(x, f, it, True, st, p_t, r_t, "newton+tangent-predictor")
+
+    def _perturb(self, x, rng):
+        if not isinstance(rng, np.random.Generator):  # a one-element box: created when first needed
+            if not rng:
+                rng.append(np.random.default_rng(self.seed))
+            rng = rng[0]
+        xn = x.copy()
+        noise = rng.standard_normal(len(self.free)) * self.perturbation
+        noise = np.where(self.var_scale > 1.0, noise * 1e-3 * self.length_scale, noise)
+        xn[self.free] += noise
+        return xn
+
+    # ----------------------------------------------------------------- inputs
+    def _task_wrench(self, wrench0) -> np.ndarray:
+        """A starting wrench as task-row values: ``wrench0`` is (6,) (all components) or
+        (m,) (the task rows, in task order); None gives zeros."""
+        m = len(self.task)
+        if wrench0 is None:
+            return np.zeros(m)
+        w = np.asarray(wrench0, dtype=float).ravel()
+        if w.size == 6:
+            w = w[self.task]
+        elif w.size != m:
+            raise InputError(f"wrench0 must have 6 or {m} (task) components (N, N·m), got {w.size}")
+        if not np.all(np.isfinite(w)):
+            raise InputError("wrench0 contains NaN or infinite values")
+        return w.copy()
+
+    def _start(self, x0) -> np.ndarray:
+        vm = self.vm
+        x = vm.reference.copy() if x0 is None else np.asarray(x0, float).ravel().copy()
+        if x.shape != (vm.model.nq,) or not np.all(np.isfinite(x)):
+            raise InputError(f"x0 must be a finite configuration of size {vm.model.nq}")
+        return x
+
+    def _vector6(self, v, name: str, unit: str) -> np.ndarray:
+        """(6,) from 6 numbers, 3 numbers (x y z: the rest zero) or ``len(task)`` numbers (the
+        task rows, in task order); :class:`InputError` on a wrong size or a NaN/inf."""
+        a = np.asarray(v, dtype=float).ravel()
+        m = len(self.task)
+        if a.size == 6:
+            out = a.copy()
+        elif a.size == 3:
+            out = np.concatenate([a, np.zeros(3)])
+        elif a.size == m:
+            out = np.zeros(6)
+            out[self.task] = a
+        else:
+            raise InputError(f"{name} must have 3, 6 or {m} (task) components ({unit}), got {a.size}")
+        if not np.all(np.isfinite(out)):
+            raise InputError(f"{name} contains NaN or infinite values: {a.tolist()}")
+        return out
+
+    def components(self, spec) -> tuple[int, ...]:
+        """Task component indices (task order) from names (``"x"``, ``"rz"``; a string of
+        space-separated names) or indices 0..5; :class:`InputError` for a name that is not
+        a component or not in the task."""
+        if spec is None:
+            return ()
+        items = spec.split() if isinstance(spec, str) else list(spec)
+        out = set()
+        for c in items:
+            if isinstance(c, str):
+                if c not in COMPONENTS:
+                    raise InputError(f"unknown task component {c!r}; components are {' '.join(COMPONENTS)}")
+                c = COMPONENTS.index(c)
+            elif isinstance(c, (int, np.integer)) and not isinstance(c, bool) and 0 <= c < 6:
+                c = int(c)
+            else:
+                raise InputError(f"task components are names ({' '.join(COMPONENTS)}) or indices 0..5; got {c!r}")
+            if c not in self.task:
+                raise InputError(
+                    f"component {COMPONENTS[c]} is not in the task of this model ({' '.join(self.vm.task_names)})"
+                )
+            out.add(c)
+        return tuple(c for c in self.task if c in out)
+
+    def _partial_rotation(self, held) -> list[int]:
+        """The held rotation components when some but not all of rx ry rz are held (else [])."""
+        hrot = [c for c in held if c >= 3]
+        return hrot if 0 < len(hrot) < 3 else []
+
+    def _rotation_targets(self, d, held, run, x0, f0, raise_on_failure: bool = True) -> EquilibriumResult:
+        """Meet the held rotation components of the deflection ``d`` in the reported
+        coordinates ``log3(R R0ᵀ)`` when only some rotations are held.
+
+        Every inner solve (``run(p_t, r_t, x0, f0)``) holds the rows of the pose error
+        ``log3(R_t Rᵀ)`` with ``R_t = exp3(d̂) R0``, a twist-type constraint whose multiplier
+        is the physical moment about the world axes of the held rows. The target ``d̂`` is
+        corrected: ``d̂[held] += d[held] − φ[held]`` and ``d̂[other] = φ[other]`` with ``φ =
+        log3(R R0ᵀ)`` of the last equilibrium, until ``|φ[held] − d[held]| ≤``
+        :data:`ROTATION_TARGET_TOL`; at the fixed point ``R_t = R``, so the held components
+        of the reported deflection equal the request and the wrench is the physical one.
+        Far from the reference the fixed point converges slowly (the free rotation-vector
+        components move with the held ones; a secant step diverged there). A held component missed by more than :data:`ROTATION_TARGET_FAIL` is a failure
+        (:class:`NoEquilibrium`, or ``converged=False`` without ``raise_on_failure``), never a
+        result with a warning only."""
+        hrot = self._partial_rotation(held)
+        p, r = displace(self.p0, self.r0, d)
+        res = run(p, r, x0, f0)
+        if not hrot:
+            return res
+        other = [c for c in (3, 4, 5) if c not in hrot]
+        dh = np.array(d, float)
+        total = res.iterations
+        k = 0
+        prev = np.inf
+        for k in range(1, ROTATION_TARGET_ITER + 1):
+            if not res.converged:
+                break
+            err = d[hrot] - res.deflection[hrot]
+            size = np.abs(err).max()
+            if size <= 0.1 * ROTATION_TARGET_TOL or (size <= ROTATION_TARGET_TOL and size > 0.5 * prev):
+                break  # met (or met and no longer improving: the inner solve's own accuracy)
+            prev = size
+            dh[hrot] += err
+            dh[other] = res.deflection[other]
+            p, r = displace(self.p0, self.r0, dh)
+            res = run(p, r, res.x, res.wrench)
+            total += res.iterations
+        warn = res.warnings
+        miss = float(np.abs(d[hrot] - res.deflection[hrot]).max())
+        if res.converged and miss > ROTATION_TARGET_TOL:
+            warn = warn + (f"held rotation components met to {miss:.2g} rad only",)
+        res = replace(res, iterations=total, path=res.path + f"+rotation-target({k})", warnings=warn)
+        if res.converged and miss > ROTATION_TARGET_FAIL:
+            msg = (
+                f"held rotation components {[COMPONENTS[c] for c in hrot]} missed by {miss:.3g} rad "
+                f"after {k} target corrections (tolerance {ROTATION_TARGET_FAIL:g} rad)"
+            )
+            res = replace(res, converged=False)
+            if raise_on_failure:
+                raise NoEquilibrium(msg, res, miss)
+        return res
+
+    # ----------------------------------------------------------------- deflection-driven
+    @one_blas_thread
+    def solve(
+        self,
+        deflection=None,
+        *,
+        target=None,
+        x0: np.ndarray | None = None,
+        wrench0: np.ndarray | None = None,
+        raise_on_failure: bool = True,
+        fast_fail: bool = False,
+    ) -> EquilibriumResult:
+        """Equilibrium for a prescribed end location: every task component held (eq. 5–10).
+
+        A stable equilibrium is returned whenever one is found: when the iteration converges
+        to an unstable one (eq. 23 fails) the configuration is pushed along each unstable
+        eigenvector of the matrix of eq. (23), both signs, and re-solved; the stable one of
+        lowest energy is kept (path ``+escape(k)``); then seeded random restarts. When only
+        unstable equilibria are found, the one of lowest energy is returned with
+        ``stable=False`` and a note in ``warnings``.
+
+        Args:
+            deflection: Deflection from the unloaded end location: 6 numbers (position m,
+                world rotation vector rad), 3 (position only) or ``len(task)`` (the task
+                rows, in task order). Components outside the task must be zero. The held
+                components of the returned ``deflection`` equal these (to 1e-12 rad for a
+                task with some but not all rotations, see :meth:`_rotation_targets`).
+                Or give ``target``.
+            target: (position (3,), rotation (3, 3)) of the end frame; the task rows of the
+                pose error ``(p* − p, log3(R* Rᵀ))`` are driven to zero.
+            x0: Starting configuration (nq,); default the unloaded reference (warm start
+                from a neighbouring equilibrium when tracing a curve).
+            wrench0: Starting wrench, (6,) or (m,) task rows (N, N·m); default zero.
+            raise_on_failure: Raise :class:`NoEquilibrium` (carrying the last iterate) when
+                no attempt converges; otherwise return it with ``converged=False``.
+            fast_fail: One Newton attempt from ``x0``, without continuation, escapes or
+                perturbed restarts: for trial points of a line search, where a failure only
+                shortens the step and the full recovery is wasted.
+        """
+        x_start = self._start(x0)
+        f_start = self._task_wrench(wrench0)
+
+        def run(p, r, x, f):
+            return self._solve_target(p, r, x, self._task_wrench(f), raise_on_failure, fast_fail)
+
+        if target is not None or deflection is None:
+            p_t, r_t = _as_target(self.vm, self.kin, self.p0, self.r0, deflection, target)
+            return run(p_t, r_t, x_start, f_start)
+        d = self._vector6(deflection, "deflection", "m, rad")
+        _as_target(self.vm, self.kin, self.p0, self.r0, d, None)  # components outside the task
+        return self._rotation_targets(d, self.task, run, x_start, f_start, raise_on_failure)
+
+    def _escape(self, res, p_t, r_t, attempt_once) -> list[EquilibriumResult]:
+        """Stable equilibria reached from the unstable equilibrium ``res`` by pushing its
+        configuration along each unstable eigenvector of the matrix of eq. (23) (at most
+        :data:`ESCAPE_MODES`), both signs, amplitudes :data:`ESCAPE_AMPLITUDES` (rad, or
+        ×L_c for prescribed coordinates) and re-solving with energy descent."""
+        vm = self.vm
+        b = evaluate_blocks(vm, self.kin, res.x, res.wrench)
+        basis = null_space(b.J_theta, b.J_q)
+        if not basis.shape[1]:
+            return []
+        ev, vecs = np.linalg.eigh(reduced_matrix(b, basis))
+        thr = res.stability.tolerance if res.stability is not None else 0.0
+        found = []
+        for j in np.argsort(-ev)[:ESCAPE_MODES]:
+            if ev[j] < -thr:
+                break
+            v = basis @ vecs[:, j]
+            v = v / max(np.abs(v / self.var_scale).max(), 1e-300)
+            for sign in (1.0, -1.0):
+                for amp in ESCAPE_AMPLITUDES:
+                    x = res.x.copy()
+                    x[self.free] += sign * amp * v
+                    r2 = attempt_once(x)
+                    if r2.converged and r2.stable:
+                        found.append(r2)
+                        break
+        return found
+
+    def _solve_target(self, p_t, r_t, x_start, f_start, raise_on_failure, fast_fail) -> EquilibriumResult:
+        """:meth:`solve` for the target pose ``(p_t, r_t)`` (every task row held)."""
+        rng = []  # the restart noise generator, seeded with ``seed`` when first used
+        total = 0
+        name = self.method
+
+        def attempt(x_init, f_init, label, continuation=True):
+            nonlocal total
+            x, f, it, ok, st = self._iterate(x_init, f_init, p_t, r_t, self.max_iter)
+            total += it
+            if not ok and (fast_fail or not continuation):
+                return self._result(x, f, total, False, st, p_t, r_t, label, with_stability=False)
+            if not ok:
+                # continuation from the attempt's start towards the target
+                ps, rs = self.kin.placement(x_init)
+                for nsteps in (4, 16):
+                    xc, fc, okc = x_init.copy(), f_init.copy(), True
+                    dlog = pin.log3(r_t @ rs.T)
+                    for k in range(1, nsteps + 1):
+                        a = k / nsteps
+                        pk = (1 - a) * ps + a * p_t
+                        rk = pin.exp3(a * dlog) @ rs
+                        xc, fc, itc, okc, st = self._iterate(xc, fc, pk, rk, self.max_iter)
+                        total += itc
+                        if not okc:
+                            break
+                    if okc:
+                        return self._result(xc, fc, total, True, st, p_t, r_t, f"{label}+continuation({nsteps})")
+                return self._result(x, f, total, False, st, p_t, r_t, label, with_stability=False)
+            return self._result(x, f, total, True, st, p_t, r_t, label)
+
+        def done(r):
+            return replace(r, iterations=total)
+
+        # A start where the end cannot move in some constrained direction (e.g. a straight
+        # chain of rigid links) gives a singular eq. (28)/(10) matrix: perturb it first (§4.1).
+        jz0 = self.kin.evaluate(x_start, hessian=False).jacobian[self.task][:, self.free]
+        sv = _singular_values(jz0)
+        if sv.size < len(self.task) or sv.min() <= 1e-9 * max(sv.max(), 1e-300):
+            x_start = self._perturb(x_start, rng)
+            name += "+perturbed-start"
+        res = attempt(x_start, f_start, name)
+        if res.converged and (res.stable or not self.follow_stable):
+            return done(res)
+        best = res
+        if res.converged and not fast_fail and self.restarts > 0:
+            esc = self._escape(res, p_t, r_t, lambda x: attempt(x, res.wrench[self.task], f"{name}+escape", False))
+            if esc:
+                pick = min(esc, key=lambda r: r.energy)
+                return done(replace(pick, path=f"{name}+escape({len(esc)})"))
+        for k in range(1, 0 if fast_fail else self.restarts + 1):
+            xr = self._perturb(x_start if not res.converged else res.x, rng)
+            r2 = attempt(xr, f_start if not res.converged else res.wrench[self.task], f"{name}+restart({k})")
+            if r2.converged and (r2.stable or not self.follow_stable):
+                return done(r2)
+            if r2.converged and (not best.converged or r2.energy < best.energy):
+                best = r2
+        best = done(best)
+        if not best.converged and raise_on_failure:
+            raise NoEquilibrium(
+                f"no equilibrium found for deflection {np.round(best.deflection, 9).tolist()} after "
+                f"{total} iterations and {self.restarts} restarts (residuals {best.residuals})",
+                best,
+                best.residual(),
+            )
+        return best
+
+    # ----------------------------------------------------------------- mixed control
+    @one_blas_thread
+    def solve_mixed(
+        self,
+        deflection=None,
+        wrench=None,
+        *,
+        held,
+        x0: np.ndarray | None = None,
+        wrench0: np.ndarray | None = None,
+        raise_on_failure: bool = True,
+        fast_fail: bool = False,
+    ) -> EquilibriumResult:
+        """Equilibrium under mixed control: each task component is *held* (its deflection
+        prescribed) or *loaded* (a dead force/moment prescribed).
+
+        The equilibrium is a stationary point of the total potential
+        ``Π = ½(θ−θ₀)ᵀK_θ(θ−θ₀) − w_Lᵀ t_L`` subject to ``t_H = d_H`` (the held rows of the
+        pose error, as :meth:`solve`); the multipliers are the reactions on the held rows.
+        With ``J`` the task Jacobian (``LOCAL_WORLD_ALIGNED``, (θ, q) columns) and ``w`` the
+        total end wrench (dead load on loaded rows, reaction on held rows)::
+
+            r = [K_θ(θ−θ₀); 0] − Jᵀ w = 0,    g_H(x) − t_H = 0,
+
+        solved by Newton's method with the matrix ``[[K − H(w), −J_Hᵀ], [J_H, 0]]``
+        (``H`` the eq. 16 contraction) in null-space form; the reduced Hessian is shifted to
+        be positive definite when a stable equilibrium is sought, and steps are accepted by an
+        Armijo test on ``Π + Σ ρ_i |e_i|`` (ℓ₁ penalty of the held rows) or, for full
+        unmodified steps, by halving the residual (a dead moment has no exact potential).
+        When the direct iteration fails, continuation in the load factor and the held
+        deflection (4, then 16 steps). No stiffness matrix is inverted: a chain whose end is
+        free along a passive direction (singular K_C) has a well-posed problem here.
+
+        All held: the same as :meth:`solve` (eq. 5–10). None held: :meth:`solve_wrench`.
+        The iteration starts at ``x0`` (default: the reference) and reports the equilibrium it
+        reaches, stable or not (``stable`` says which; no search for remote stable states
+        under load control).
+
+        Args:
+            deflection: Prescribed deflection (m, rad; 6, 3 or ``len(task)`` numbers, see
+                :meth:`solve`); non-zero only on held components.
+            wrench: Dead load (N at the end frame origin, N·m; world axes; 6, 3 or
+                ``len(task)`` numbers); non-zero only on loaded components.
+            held: Held task components: names (``("x", "y")`` or ``"x y"``) or indices
+                0..5; the other task components are loaded.
+            x0: Starting configuration (nq,).
+            wrench0: Starting wrench (6,) or (m,) (used when every component is held).
+            raise_on_failure: Raise :class:`NoEquilibrium` when nothing converges.
+            fast_fail: One attempt, no continuation.
+
+        Returns:
+            :class:`EquilibriumResult` with ``held``, the total ``wrench``, ``stable`` (the
+            control as run) and ``stable_end_held`` (eq. 23).
+        """
+        hcomp = self.components(held)
+        d = np.zeros(6) if deflection is None else self._vector6(deflection, "deflection", "m, rad")
+        w = np.zeros(6) if wrench is None else self._vector6(wrench, "wrench", "N, N·m")
+        outside = [COMPONENTS[i] for i in range(6) if i not in self.task and (d[i] or w[i])]
+        if outside:
+            raise InputError(
+                f"components {outside} are not constrained by this model (task is "
+                f"{' '.join(self.vm.task_names)}): no deflection or wrench can be prescribed there"
+            )
+        bad = [COMPONENTS[c] for c in self.task if c not in hcomp and d[c]]
+        if bad:
+            raise InputError(f"deflection prescribed on loaded components {bad}: hold them, or prescribe their wrench")
+        bad = [COMPONENTS[c] for c in hcomp if w[c]]
+        if bad:
+            raise InputError(f"wrench prescribed on held components {bad}: their wrench is the reaction")
+        if len(hcomp) == len(self.task):
+            return self.solve(d, x0=x0, wrench0=wrench0, raise_on_failure=raise_on_failure, fast_fail=fast_fail)
+        x_start = self._start(x0)
+        hrows = [self.task.index(c) for c in hcomp]
+
+        def run(p, r, x, f):
+            return self._mixed_solve_target(p, r, x, hrows, w, raise_on_failure, fast_fail)
+
+        return self._rotation_targets(d, hcomp, run, x_start, None, raise_on_failure)
+
+    @one_blas_thread
+    def solve_wrench(
+        self,
+        wrench,
+        *,
+        x0: np.ndarray | None = None,
+        raise_on_failure: bool = True,
+        fast_fail: bool = False,
+    ) -> EquilibriumResult:
+        """Equilibrium for a prescribed dead end wrench: every task component loaded.
+
+        Newton's method on the total potential (:meth:`solve_mixed` with nothing held),
+        with line search and continuation in the load factor; it replaces the outer loop of
+        eq. (11), which needed a regular K_C. ``stable`` is the verdict under this load
+        control (``K − H`` positive definite: the end free under the dead load), and
+        ``stable_end_held`` that of eq. (23).
+
+        Args:
+            wrench: Force (N) at the end frame origin and moment (N·m), world axes: 6, 3
+                (force) or ``len(task)`` (task rows) numbers; zero outside the task.
+            x0: Starting configuration (nq,); default the unloaded reference.
+        """
+        return self.solve_mixed(wrench=wrench, held=(), x0=x0, raise_on_failure=raise_on_failure, fast_fail=fast_fail)
+
+    def _mixed_solve_target(self, p_t, r_t, x_start, hrows, w_dead, raise_on_failure, fast_fail):
+        """:meth:`solve_mixed` for the held rows ``hrows`` (positions in the task) of the target
+        pose ``(p_t, r_t)`` and the dead load ``w_dead`` (6,): a direct attempt, continuation
+        in the load factor and the held target, then perturbed restarts."""
+        total = 0
+        rng = []
+        label = "total-potential"
+        # the equilibrium next to the start first (plain Newton, stable or not: a load applied
+        # at the start configuration), then energy descent towards a stable one
+        x, lam, it, ok, st = self._mixed_newton(x_start, hrows, w_dead, p_t, r_t, LOCAL_MAX_ITER, local=True)
+        total += it
+        if not ok:
+            # descent crosses the whole energy landscape (a pinned chain swinging round under a
+            # dead load) in steps of at most max_step: a longer budget than a local attempt
+            x, lam, it, ok, st = self._mixed_newton(x_start, hrows, w_dead, p_t, r_t, DESCENT_ITER_FACTOR * self.max_iter)
+            total += it
+            label += "+descent"
+        if not ok and not fast_fail:
+            ps, rs = self.kin.placement(x_start)
+            dlog = pin.log3(r_t @ rs.T)
+            starts = [x_start] + [self._perturb(x_start, rng) for _ in range(min(self.restarts, 2))]
+            for si, xs in enumerate(starts):
+                for nsteps in (1, 4, 16) if si else (4, 16):
+                    xc, okc = xs.copy(), True
+                    for k in range(1, nsteps + 1):
+                        a = k / nsteps
+                        pk = (1 - a) * ps + a * p_t
+                        rk = pin.exp3(a * dlog) @ rs
+                        xc, lamc, itc, okc, stc = self._mixed_newton(xc, hrows, a * w_dead, pk, rk, self.max_iter)
+                        total += itc
+                        if not okc:
+                            break
+                    if okc:
+                        x, lam, ok, st = xc, lamc, True, stc
+                        label += (f"+restart({si})" if si else "") + (f"+continuation({nsteps})" if nsteps > 1 else "")
+                        break
+                if ok:
+                    break
+        res = self._mixed_result(x, lam, total, ok, st, hrows, w_dead, p_t, r_t, label)
+        if not ok and raise_on_failure:
+            held = " ".join(COMPONENTS[self.task[i]] for i in hrows) or "none"
+            raise NoEquilibrium(
+                f"no equilibrium found under load control (held: {held}; dead wrench "
+                f"{np.round(w_dead, 9).tolist()}) after {total} iterations (residuals {res.residuals})",
+                res,
+                res.residual(),
+            )
+        return res
+
+    def _mixed_state(self, x, hrows, lrows, w_dead, p_t, r_t, hessian):
+        """Quantities of the mixed Newton iteration at ``x``: (state, J, τ, ∇Π, Y, Z, R, λ, r, e)."""
+        vm, free, nt = self.vm, self.free, self.nt
+        tarr = np.asarray(self.task)
+        st = self.kin.evaluate(x, hessian=hessian)
+        jac = st.jacobian[tarr][:, free]
+        n = len(free)
+        tau = np.zeros(n)
+        tau[:nt] = vm.K_theta @ (x[vm.theta_idx] - vm.theta0)
+        gl = tau - jac[lrows].T @ w_dead[tarr[lrows]]
+        k = len(hrows)
+        if k:
+            q, rm = np.linalg.qr(jac[hrows].T, mode="complete")
+            y, z, rr = q[:, :k], q[:, k:], rm[:k]
+            try:
+                with np.errstate(all="ignore"):
+                    lam = _solve_triangular(rr, y.T @ gl)
+            except np.linalg.LinAlgError:  # held rows not independent here: least squares
+                lam = np.linalg.lstsq(jac[hrows].T, gl, rcond=None)[0]
+        else:
+            y, z, rr, lam = np.zeros((n, 0)), np.eye(n), np.zeros((0, 0)), np.zeros(0)
+        r = gl - jac[hrows].T @ lam
+        e = pose_error(p_t, r_t, st.position, st.rotation)[tarr[hrows]]
+        return st, jac, tau, gl, y, z, rr, lam, r, e
+
+    def _potential(self, x, st, lrows, w_dead) -> float:
+        """Total potential ``E − w_Lᵀ t_L`` (J); the moment's work through ``log3(R R0ᵀ)``
+        (exact for a force; a dead moment has no exact potential in 3-D)."""
+        tl = np.asarray(self.task)[lrows]
+        d = deflection(self.p0, self.r0, st.position, st.rotation)
+        return self.energy(x) - float(w_dead[tl] @ d[tl])
+
+    def _mixed_newton(self, x, hrows, w_dead, p_t, r_t, max_iter, local=False):
+        """Newton on the stationarity of the total potential (see :meth:`solve_mixed`) from
+        ``x``; returns (x, λ (held rows), iterations, converged, state).
+
+        ``local``: plain Newton steps only, each kept only if it halves the residual and is
+        within the step limit (converges to the equilibrium next to ``x``, stable or not);
+        otherwise shifted (descent) steps when ``follow_stable`` and a line search."""
+        kin = self.kin
+        free, m = self.free, len(self.task)
+        hrows = np.asarray(hrows, int)
+        lrows = np.array([i for i in range(m) if i not in set(hrows.tolist())], int)
+        tarr = np.asarray(self.task)
+        hcomp = tarr[hrows]
+        escale = self._err_scale[hrows]
+        hp, hr = hcomp < 3, hcomp >= 3
+        kz = self._kz
+        kscale = max(self.kscale, 1e-300)
+        shift = SHIFT_TOL * kscale
+        tol = self.tol
+        x = np.array(x, float)
+        polish = escapes = 0
+        kkt_prev = np.inf
+        lam, st = np.zeros(len(hrows)), None
+        for it in range(max_iter + 1 + POLISH_ITERATIONS):
+            st, jac, tau, gl, y, z, rr, lam, r, e = self._mixed_state(x, hrows, lrows, w_dead, p_t, r_t, True)
+            if not (np.all(np.isfinite(lam)) and np.all(np.isfinite(r))):
+                return x, np.nan_to_num(lam), it, False, st
+            w6 = w_dead.copy()
+            w6[hcomp] = lam
+            ae = np.abs(e)
+            ep = ae[hp].max() if hp.any() else 0.0
+            er = ae[hr].max() if hr.any() else 0.0
+            rs = np.abs(r).max() if r.size else 0.0
+            load = np.abs(jac.T @ w6[tarr]).max() if jac.size else 0.0
+            stat_scale = max(np.abs(tau).max() if tau.size else 0.0, load, 1e-6 * self.kscale)
+            conv = ep <= 0.01 * tol * self.length_scale and er <= 0.01 * tol and rs <= tol * stat_scale
+            hz = st.psi_hessian(w6)[np.ix_(free, free)]
+            wm = kz - hz
+            red = z.T @ wm @ z
+            lmin = np.linalg.eigvalsh(0.5 * (red + red.T)).min() if red.size else np.inf
+            modified = False
+            if self.follow_stable and not local and lmin < shift:
+                red = red + (shift - lmin + 1e-3 * abs(lmin)) * np.eye(red.shape[0])
+                modified = True
+            with np.errstate(all="ignore"):
+                try:
+                    py = _solve_triangular(rr, e, trans="T") if len(hrows) else np.zeros(0)
+                except np.linalg.LinAlgError:
+                    py = np.full(len(hrows), np.nan)
+                dy = y @ py
+                try:
+                    pz = np.linalg.solve(red, z.T @ (r + wm @ dy))
+                except np.linalg.LinAlgError:
+                    pz = np.linalg.lstsq(red, z.T @ (r + wm @ dy), rcond=None)[0]
+                dx = dy - z @ pz
+            if not np.all(np.isfinite(dx)):
+                return x, lam, it, conv, st
+            if not conv and not modified and np.abs(dx / self.var_scale).max() <= POLISH_STEP:
+                # at the rounding floor: the Newton correction is negligible
+                conv = ep <= 0.01 * tol * self.length_scale and er <= 0.01 * tol and rs <= 1e3 * tol * stat_scale
+            if conv and polish == 0 and not local:
+                kkt_prev = np.inf
+            if conv and modified and not local and escapes < ESCAPE_MODES and lmin < -STABILITY_TOL * kscale:
+                # descent crept onto a saddle: leave it along its most negative curvature
+                escapes += 1
+                sym = z.T @ wm @ z
+                ev, vec = np.linalg.eigh(0.5 * (sym + sym.T))
+                v = z @ vec[:, 0]
+                x = x.copy()
+                x[free] += v * (self.max_step / max(np.abs(v / self.var_scale).max(), 1e-300))
+                flush_tiny(x)
+                continue
+            if conv:
+                if modified or polish >= POLISH_ITERATIONS or np.abs(dx / self.var_scale).max() <= POLISH_STEP:
+                    return x, lam, it, True, st
+                polish += 1
+                x = x.copy()
+                x[free] += dx
+                flush_tiny(x)
+                continue
+            if it - polish >= max_iter:
+                break
+            smax = np.abs(dx / self.var_scale).max()
+            kkt0 = float(np.linalg.norm(e / escale) + np.linalg.norm(r) / kscale)
+            if local:
+                if not (smax <= self.max_step and kkt0 < 0.5 * kkt_prev):
+                    return x, lam, it, False, st
+                kkt_prev = kkt0
+                x = x.copy()
+                x[free] += dx
+                flush_tiny(x)
+                continue
+            if smax > self.max_step:
+                dx = dx * (self.max_step / smax)
+                modified = True
+            rho = 2.0 * np.abs(lam) + 1e-9 * stat_scale * np.where(hp, 1.0 / self.length_scale, 1.0)
+            phi0 = self._potential(x, st, lrows, w_dead) + float(rho @ ae)
+            slope = min(float(gl @ dx) - float(rho @ ae), 0.0)
+            noise = 1e-13 * (abs(phi0) + self.energy(x) + 1e-300)
+            alpha, accepted = 1.0, False
+            for _ in range(40):
+                xn = x.copy()
+                xn[free] += alpha * dx
+                flush_tiny(xn)
+                stn, _, _, _, _, _, _, lamn, rn, en = self._mixed_state(xn, hrows, lrows, w_dead, p_t, r_t, False)
+                if np.all(np.isfinite(rn)) and np.all(np.isfinite(lamn)):
+                    if not self.follow_stable:
+                        accepted = True
+                    elif self._potential(xn, stn, lrows, w_dead) + float(rho @ np.abs(en)) <= (
+                        phi0 + 1e-4 * alpha * slope + noise
+                    ):
+                        accepted = True
+                    elif alpha == 1.0 and not modified:
+                        accepted = float(np.linalg.norm(en / escale) + np.linalg.norm(rn) / kscale) < 0.5 * kkt0
+                if accepted:
+                    break
+                alpha *= 0.5
+            if not accepted:
+                return x, lam, it + 1, False, st
+            x = xn
+        return x, lam, max_iter, False, st
+
+    def _mixed_result(self, x, lam, iters, ok, st, hrows, w_dead, p_t, r_t, path) -> EquilibriumResult:
+        vm, m = self.vm, len(self.task)
+        tarr = np.asarray(self.task)
+        hrows = np.asarray(hrows, int)
+        lrows = np.array([i for i in range(m) if i not in set(hrows.tolist())], int)
+        st, jac, tau, gl, y, z, rr, lam2, r, e = self._mixed_state(x, hrows, lrows, w_dead, p_t, r_t, False)
+        if np.all(np.isfinite(lam2)):
+            lam = lam2
+        w6 = w_dead.copy()
+        w6[tarr[hrows]] = lam
+        hcomp = tarr[hrows]
+        ae = np.abs(e)
+        res = {
+            "position": float(ae[hcomp < 3].max()) if np.any(hcomp < 3) else 0.0,
+            "orientation": float(ae[hcomp >= 3].max()) if np.any(hcomp >= 3) else 0.0,
+            "statics": float(np.abs(r).max()) if r.size else 0.0,
+        }
+        stab = end = None
+        warnings = ()
+        if ok:
+            b = evaluate_blocks(vm, self.kin, x, w6)
+            stab = check_stability_held(b, np.eye(m)[hrows])
+            end = check_stability(b)
+            if not stab.stable:
+                loaded = " ".join(COMPONENTS[c] for c in tarr[lrows])
+                warnings = (
+                    f"unstable under the prescribed load (loaded components {loaded}): the end would move "
+                    "away from this equilibrium under the dead load"
+                    + ("; stable with the end held (eq. 23)" if end.stable else ""),
+                )
+        return self._pack(x, w6, st, ok, iters, res, path, stab, end, tuple(int(c) for c in hcomp), warnings)
+
+    # ----------------------------------------------------------------- checks
+    @one_blas_thread
+    def verify(self, res: EquilibriumResult, *, method: str = "eq30", rtol: float = VERIFY_RTOL) -> EquilibriumResult:
+        """Check an equilibrium of this solver; retry once (tighter tolerance, warm start) on
+        failure; return it with ``checks`` filled, or raise :class:`EquilibriumCheckError`.
+
+        1. Eq. (5) recomputed with Pinocchio over all coordinates, ``K_θ(θ−θ₀) − J_θᵀw`` and
+           ``−J_qᵀw`` with the full 6-D wrench, each row against its own scale: revolute rows
+           (N·m) against ``max(|τ|, |f|·L_c + |m|)``, prismatic rows (N) against
+           ``max(|τ|, |f| + |m|/L_c)``; pass below :data:`VERIFY_STATICS`.
+        2. Both verdicts recomputed from fresh blocks (:func:`check_stability_held` for the
+           control as run, :func:`check_stability` for eq. 23); a verdict whose deciding
+           eigenvalue is within 10× the threshold of zero is not contested.
+        3. K_C (``method``) along its softest task direction ``u`` (smallest |eigenvalue| of
+           the symmetric part, rotations scaled by L_c) against central differences of the
+           wrench of re-solved equilibria at ``t ± h u`` (every component held, plain Newton
+           from ``res``), ``h`` = 1e-6, 1e-8, 1e-10 ×L_c: relative error ≤ ``rtol``. Skipped
+           when K_C is singular (the caller reports that).
+
+        Raises:
+            NoEquilibrium: ``res`` did not converge. EquilibriumCheckError: a check failed twice.
+        """
+        if not res.converged:
+            raise NoEquilibrium("the equilibrium did not converge: nothing to check", res, res.residual())
+        checks = self._checks(res, method, rtol)
+        if checks["ok"]:
+            return replace(res, checks=checks)
+        # retry: the same control, tighter tolerance, from the equilibrium itself
+        retry = self._resolve_like(res, tol=max(self.tol * 1e-2, TOL_RANGE[0]), restarts=1)
+        if retry is not None and (retry.stable or not res.stable):
+            checks2 = self._checks(retry, method, rtol)
+            if checks2["ok"]:
+                checks2["retried"] = True
+                return replace(retry, checks=checks2, path=retry.path + "+verified-retry")
+        failed = ", ".join(k for k in ("statics_ok", "stability_ok", "stiffness_ok") if not checks.get(k, True))
+        raise EquilibriumCheckError(
+            f"the equilibrium failed its check ({failed}): statics residual {checks['statics_relative']:.2g} "
+            f"(relative), K_C along the softest direction off by {checks.get('stiffness_relative_error', float('nan')):.2g} "
+            "against re-solved equilibria; not reported"
+            + (
+                " (the equilibrium is at or next to a critical point, where K_C jumps between branches)"
+                if not checks["stiffness_ok"] and checks["statics_ok"]
+                else ""
+            ),
+            res,
+            checks,
+        )
+
+    def _resolve_like(self, res, **options):
+        """``res`` re-solved under the same control from its own configuration (None on failure)."""
+        held = tuple(self.task) if res.held is None else tuple(res.held)
+        d = np.zeros(6)
+        d[list(held)] = res.deflection[list(held)]
+        loaded = [c for c in self.task if c not in held]
+        w = np.zeros(6)
+        w[loaded] = res.wrench[loaded]
+        try:
+            return self._sibling(**options).solve_mixed(d, w, held=held, x0=res.x, wrench0=res.wrench)
+        except NoEquilibrium:
+            return None
+
+    def _checks(self, res, method, rtol) -> dict:
+        vm = self.vm
+        lc = self.length_scale
+        x = np.asarray(res.x, float)
+        w6 = np.asarray(res.wrench, float)
+        st = self.kin.evaluate(x, hessian=False)
+        tau = vm.K_theta @ (x[vm.theta_idx] - vm.theta0)
+        gen = st.jacobian.T @ w6
+        r = np.concatenate([tau - gen[vm.theta_idx], -gen[vm.q_idx]])
+        tq = np.concatenate([tau, np.zeros(vm.n_q)])
+        fn, mn = float(np.abs(w6[:3]).max()), float(np.abs(w6[3:]).max())
+        prism = self.var_scale > 1.0
+        scale = np.where(prism, np.maximum(np.abs(tq), fn + mn / lc), np.maximum(np.abs(tq), fn * lc + mn))
+        scale = np.maximum(scale, np.abs(tq).max() * 1e-3 if tq.size else 0.0)
+        scale = np.maximum(scale, 1e-300)
+        rel = float((np.abs(r) / scale).max()) if r.size else 0.0
+        off_task = [i for i in range(6) if i not in self.task]
+        checks = {
+            "statics_relative": rel,
+            "statics_ok": bool(rel <= VERIFY_STATICS and not np.any(w6[off_task])),
+            "position_m": res.residuals.get("position", 0.0),
+            "orientation_rad": res.residuals.get("orientation", 0.0),
+        }
+        checks["statics_ok"] = bool(
+            checks["statics_ok"]
+            and checks["position_m"] <= max(self.tol, 1e-12) * lc * 10
+            and checks["orientation_rad"] <= max(self.tol, 1e-12) * 10
+        )
+        b = evaluate_blocks(vm, self.kin, x, w6)
+        held = tuple(self.task) if res.held is None else tuple(res.held)
+        hm = np.eye(len(self.task))[[self.task.index(c) for c in held]]
+        ctl, end = check_stability_held(b, hm), check_stability(b)
+
+        def agrees(given, fresh):
+            if given is None:
+                return True
+            top = fresh.eigenvalues.max() if fresh.eigenvalues.size else -np.inf
+            return bool(given.stable == fresh.stable or abs(top) <= 10 * fresh.tolerance)
+
+        checks["stable"] = ctl.stable
+        checks["stable_end_held"] = end.stable
+        checks["stability_ok"] = agrees(res.stability, ctl) and agrees(res.stability_end_held, end)
+        checks["stiffness_ok"] = True
+        try:
+            k = stiffness_from_blocks(b, vm.task, method).task_stiffness
+        except SingularStiffness:
+            k = None
+            checks["stiffness_checked"] = False
+        if k is not None:
+            checks.update(self._check_stiffness(res, k, rtol))
+        checks["ok"] = bool(checks["statics_ok"] and checks["stability_ok"] and checks["stiffness_ok"])
+        return checks
+
+    def _check_stiffness(self, res, k, rtol) -> dict:
+        task = self.task
+        lc = self.length_scale
+        dsc = np.where(np.array(task) < 3, 1.0, 1.0 / lc)  # rotations in units of L_c
+        ks = dsc[:, None] * k * dsc[None, :]
+        ev, vec = np.linalg.eigh(0.5 * (ks + ks.T))
+        j = int(np.argmin(np.abs(ev)))
+        u = vec[:, j] * dsc  # a (m,) direction: m for translations, rad for rotations
+        u /= np.linalg.norm(u / dsc)
+        plain = self._sibling(tol=self.tol, max_iter=self.max_iter, follow_stable=False, restarts=0)
+        ku = k @ u
+        best = np.inf
+        for h in (1e-6 * lc, 1e-8 * lc, 1e-10 * lc):
+            fs = []
+            for sgn in (1.0, -1.0):
+                dt = np.zeros(6)
+                dt[task] = sgn * h * u
+                try:
+                    rr = plain.solve(target=displace(res.position, res.rotation, dt), x0=res.x, wrench0=res.wrench, fast_fail=True)
+                except NoEquilibrium:
+                    rr = None
+                if rr is None or not rr.converged:
+                    break
+                fs.append(rr.wrench[task])
+            if len(fs) < 2:
+                continue
+            fd = (fs[0] - fs[1]) / (2 * h)
+            den = max(np.linalg.norm(ku), np.linalg.norm(fd), 1e-12 * np.abs(k).max(), 1e-300)
+            best = min(best, float(np.linalg.norm(ku - fd) / den))
+            if best <= rtol:
+                break
+        return {
+            "stiffness_checked": True,
+            "stiffness_direction": u,
+            "stiffness_relative_error": best,
+            "stiffness_ok": bool(best <= rtol),
+        }
+
+
+def solve_equilibrium(vm: VjmModel, deflection=None, *, target=None, **kwargs) -> EquilibriumResult:
+    """Convenience: :meth:`EquilibriumSolver.solve` with a fresh solver.
+
+    Solver options (``method``, ``tol``, ``max_iter``, ``restarts``, ``seed``, ...) and
+    ``x0``/``wrench0``/``raise_on_failure`` may be passed as keywords."""
+    call = {k: kwargs.pop(k) for k in ("x0", "wrench0", "raise_on_failure") if k in kwargs}
+    return EquilibriumSolver(vm, **kwargs).solve(deflection, target=target, **call)
+
+
+def solve_for_wrench(vm: VjmModel, wrench, **kwargs) -> EquilibriumResult:
+    """Convenience: :meth:`EquilibriumSolver.solve_wrench` with a fresh solver."""
+    call = {k: kwargs.pop(k) for k in ("x0", "raise_on_failure") if k in kwargs}
+    return EquilibriumSolver(vm, **kwargs).solve_wrench(wrench, **call)
