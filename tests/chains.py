@@ -77,18 +77,3 @@ def random_vjm(
         "links": links,
     }
     return load_vjm(generate_vjm(urdf, spec))
-
-
-def robot_fd_stiffness(rs, eq, h: float) -> np.ndarray:
-    """Central differences (6, 6) of the platform wrench of re-solved robot equilibria
-    (``RobotSolver``) around ``eq``, platform displaced by ±h along each component (m, rad)."""
-    from vjm_pin.kinematics.chain import displace
-
-    fd = np.zeros((6, 6))
-    for j in range(6):
-        dt = np.zeros(6)
-        dt[j] = h
-        fp = rs.solve(target=displace(eq.position, eq.rotation, dt), x0=eq).wrench
-        fm = rs.solve(target=displace(eq.position, eq.rotation, -dt), x0=eq).wrench
-        fd[:, j] = (fp - fm) / (2 * h)
-    return fd

@@ -112,7 +112,6 @@ BAD_LINES = [
     ("analyze ur5 --q nosuch=1", "unknown joint 'nosuch'"),
     ("analyze ur5 --q shoulder_pan_joint=abc", "'abc' is not a number"),
     ("analyze ur5 --q shoulder_pan_joint", "NAME=VALUE"),
-    ("view orthoglide-q0 --deflection 0.001 0 0 --html x.html", "parallel model"),
     ("curve ur5 {C} --subdivide 2", "not to the robot 'ur5'"),
     # --- numbers
     ("analyze paper-c-s --deflection 1 2", "needs 3 or 6 numbers, got 2"),
@@ -121,6 +120,23 @@ BAD_LINES = [
     ("analyze paper-c-s --deflection abc 0 0", "invalid float value: 'abc'"),
     ("analyze paper-c-s --deflection", "expected at least one argument"),
     ("analyze paper-c-s --payload -1", "payload"),
+    ("analyze paper-c-s --payload nan", "--payload must be a finite non-negative mass"),
+    # --- dead loads (--load FRAME FX FY FZ [MX MY MZ]) and closed mechanisms
+    ("analyze paper-c-s --load ennd 0 0 -1", "unknown frame 'ennd' in model 'paper-c-s'; did you mean 'end'?"),
+    ("analyze portal-frame --load top_lft 0 0 -1", "did you mean 'top_left'"),
+    ("analyze paper-c-s --load end 1 0", "expected FRAME FX FY FZ [MX MY MZ]"),
+    ("analyze paper-c-s --load end 1 0 0 1", "expected FRAME FX FY FZ [MX MY MZ]"),
+    ("analyze paper-c-s --load end 1 0 abc", "'abc' is not a number"),
+    ("analyze paper-c-s --load end 1 0 inf", "'inf' is not finite"),
+    ("analyze paper-c-s --load", "expected at least one argument"),
+    ("{CURVE} --load nosuch 0 0 -1", "unknown frame 'nosuch'"),
+    ("{CURVE} --load end 0 0", "expected FRAME FX FY FZ"),
+    ("analyze portal-frame --method eq31", "invalid choice: 'eq31'"),
+    ("{CURVE} --refine-tol 1e300", "--refine-tol: must be from 1e-10 to 0.1"),
+    ("analyze portal-frame --subdivide 2", "not available for models with loop closures"),
+    ("curve portal-frame {C} --subdivide 2", "not available for models with loop closures"),
+    ("analyze portal-frame --wrench 1 0 0 --load top 0 0 -1 0 0", "expected FRAME FX FY FZ"),
+    ("analyze portal-frame --wrench 0 1 0", "not in the task"),
     ("analyze paper-c-s --subdivide 0", "--subdivide: must be an integer from 1 to"),
     ("analyze paper-c-s --subdivide 1000", "--subdivide: must be an integer from 1 to"),
     ("curve paper-c-s --direction 0 0 0 --max-deflection 0.01", "direction"),
@@ -334,6 +350,23 @@ def test_every_parser_knows_exponent_negatives():
 def test_negative_numbers_parse_in_every_command(argv, attr, value):
     args = build_parser().parse_args(argv)
     assert getattr(args, attr) == pytest.approx(value)
+
+
+@pytest.mark.parametrize("command", ["analyze", "curve"])
+def test_load_takes_negative_numbers_and_repeats(command):
+    """--load FRAME FX FY FZ [MX MY MZ]: negative numbers in every float form are values, the
+    option repeats, 3 or 6 numbers each (Load tuples in order, world axes)."""
+    from vjm_pin.cli.common import loads_from_args
+
+    extra = ["--direction", "-1", "0", "0", "--max-deflection", "1e-2"] if command == "curve" else []
+    args = build_parser().parse_args(
+        [command, "paper-c-s", *extra, "--load", "link1", "-1e-3", "-.5", "0",
+         "--load", "end", "1", "-2E1", "3", "-1", "-0", "2.5"]
+    )
+    la, lb = loads_from_args(args)
+    assert (la.frame, lb.frame) == ("link1", "end")
+    assert la.wrench == pytest.approx([-1e-3, -0.5, 0, 0, 0, 0])
+    assert lb.wrench == pytest.approx([1, -20, 3, -1, 0, 2.5])
 
 
 def test_negative_exponent_deflection_runs(capsys):

@@ -34,7 +34,6 @@ from vjm_pin.exceptions import (
 )
 from vjm_pin.kinematics.frames import FrameKinematics
 from vjm_pin.kinematics.chain import Kinematics
-from vjm_pin.loads import LinkLoads, generalized_load, load_hessian
 from vjm_pin.model.format import COMPONENTS, Closure
 
 from . import portal_frame as pf
@@ -532,13 +531,6 @@ def test_link_weights_are_forces_at_the_centres_of_mass():
     assert rel(st.derivative, as_loads.derivative) < 1e-12
     assert st.potential == pytest.approx(as_loads.potential, rel=1e-12)
 
-    class _Vm:  # vjm_pin.loads takes a VjmModel; only its .model is used
-        pass
-
-    vm = _Vm()
-    vm.model = model
-    assert rel(st.force, generalized_load(vm, LinkLoads(g), x)) < 1e-14
-    assert rel(st.derivative, load_hessian(vm, LinkLoads(g), x)) < 1e-14
     assert model.gravity.linear @ g != pytest.approx(g @ g), (
         "the caller's model keeps its own gravity"
     )
@@ -730,13 +722,17 @@ def test_portal_generator_parameters_reach_the_file():
         assert p == pytest.approx([0.75, 0.0, h])
 
 
-def test_the_tree_solver_refuses_closed_models_until_the_mechanism_solver():
-    """The open-chain solver would ignore the closures (a silent wrong stiffness): models with
-    closures are refused by name resolution (CLI and Python) until the mechanism solver lands."""
+def test_the_tree_solver_refuses_closed_models():
+    """The open-chain solver would ignore the closures (a silent wrong stiffness): it refuses
+    models with closures by name; every command resolves them and solves them with the
+    mechanism solver."""
     from vjm_pin.model.registry import resolve_model
+    from vjm_pin.solver import EquilibriumSolver, MechanismSolver
 
+    vm = resolve_model("portal-frame")
     with pytest.raises(ModelError, match="loop closures \\(right_foot\\)"):
-        resolve_model("portal-frame")
+        EquilibriumSolver(vm)
+    assert MechanismSolver(vm).solve(wrench=[1.0, 0, 0]).converged
     assert resolve_model("paper-a-s").closures == ()
 
 

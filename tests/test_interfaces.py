@@ -107,7 +107,7 @@ def test_curve_serial_and_parallel_points_and_critical_points_share_keys(capsys)
     par = run_json(
         capsys,
         ["curve", "orthoglide-q1", "--direction", "-1", "-1", "-1", "--max-deflection", "0.001", "--steps", "2",
-         "--matrices", "--json"],
+         "--free", "--matrices", "--json"],
     )
     assert list(serial) == list(par)
     assert serial["critical"] and par["critical"]

@@ -375,12 +375,11 @@ def test_analyze_routes_closed_models_to_the_mechanism_solver(capsys):
     assert out["stiffness_unloaded"][0][0] == pytest.approx(4 * K / HEIGHT**2, rel=1e-12)
     assert out["stable"] is True and out["stable_end_held"] is True
     assert out["control"] == {"held": [], "loaded": ["x"]}
-    assert any("3 redundant" in w for w in out["warnings"])
+    assert "3 redundant" in out["multipliers_note"] and "minimum-norm" in out["multipliers_note"]
     assert main(["analyze", "four-bar", "--deflection", "0.01", "0", "-0.004"]) == 0
     text = capsys.readouterr().out
     assert "control: held x z" in text and "stable (eq. 23, end held): stable" in text
-    # the commands still on the serial solver keep refusing closed models
-    assert main(["view", "portal-frame", "--wrench", "1", "0", "0"]) == 2
-    assert "loop closures" in capsys.readouterr().err
+    # options still on the serial solver keep refusing closed models ('view' shows them
+    # since issue 15, and without --html it serves until Ctrl-C: not run here)
     assert main(["analyze", "portal-frame", "--wrench", "1", "0", "0", "--subdivide", "2"]) == 2
     assert "--subdivide is not available" in capsys.readouterr().err

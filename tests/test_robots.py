@@ -166,7 +166,7 @@ def test_default_frames_and_tasks():
     dp = build_robot("double_pendulum").vm
     assert dp.n_theta == 2 and len(dp.task) == 2  # 2 joints: a 2-D task
     assert 1 in dp.task  # hanging along z: y and the rotation about x move the tip
-    with pytest.raises(AmbiguousFrame, match="--frame") as e:
+    with pytest.raises(AmbiguousFrame, match="choose the end frame") as e:
         build_robot("baxter")
     assert "left_hand" in " ".join(e.value.candidates) or e.value.candidates
     assert isinstance(e.value, FrameNotFound)

@@ -6,7 +6,6 @@ import pytest
 from vjm_pin import (
     EquilibriumSolver,
     NoEquilibrium,
-    SingularStiffness,
     load_vjm,
     loaded_stiffness,
     unloaded_stiffness,

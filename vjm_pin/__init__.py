@@ -27,8 +27,8 @@ from vjm_pin.exceptions import (
 # (PEP 562 ``__getattr__``), so ``import vjm_pin.cli`` is quick and the ``vjm-pin`` command
 # handles a Ctrl-C during those imports (no traceback). Add a new export to both lists.
 if TYPE_CHECKING:
-    from vjm_pin.model.generator import generate_vjm, load_spec
     from vjm_pin.model.format import SpringGroup, VjmModel, load_vjm
+    from vjm_pin.model.generator import generate_vjm, load_spec
     from vjm_pin.solver import (
         EquilibriumResult,
         EquilibriumSolver,

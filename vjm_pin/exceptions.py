@@ -203,3 +203,47 @@ class ClosureViolated(ModelError):
         self.component = component
         self.violation = violation
         super().__init__(message)
+
+
+class LoadError(VjmError):
+    """A dead load, payload or gravity that cannot be applied (a bad mass, a model that
+    cannot carry it in the asked analysis)."""
+
+
+class UnknownRobot(ModelError):
+    """A robot name that is neither a file, a bundled model nor an ``example-robot-data`` robot.
+
+    Attributes:
+        name: The unknown name.
+        candidates: Known robot names.
+    """
+
+    def __init__(self, name: str, candidates):
+        import difflib
+
+        self.name = name
+        self.candidates = list(candidates)
+        self.close = difflib.get_close_matches(name, self.candidates, n=3)
+        hint = f"; did you mean {', '.join(self.close)}?" if self.close else ""
+        # one line: the full list (dozens of names) is in `candidates` and in `vjm-pin models`
+        super().__init__(
+            f"unknown model or robot '{name}': not a file, not a bundled model and not an "
+            f"example-robot-data robot ({len(self.candidates)} known names){hint}"
+        )
+
+
+class AmbiguousFrame(FrameNotFound):
+    """No default end frame: the robot's tree branches. Attributes: ``link`` (where it
+    branches), ``branches`` (the child joints), ``candidates`` (leaf links with movable
+    joints on their path)."""
+
+    def __init__(self, link: str, branches, candidates):
+        self.name = "<default>"
+        self.link = link
+        self.branches = list(branches)
+        self.candidates = list(candidates)
+        ModelError.__init__(
+            self,
+            f"the robot branches at link '{link}' into joints {self.branches}: choose the end frame; "
+            f"candidates: {', '.join(self.candidates)}",
+        )

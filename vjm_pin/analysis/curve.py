@@ -1,4 +1,12 @@
-"""Force–deflection curves and critical points (paper §6.1, Fig. 4–6).
+"""Force–deflection curves and critical points (paper §6.1, Fig. 4–6), for every model kind.
+
+One tracer and one critical-point rule for serial chains, parallel robots and closed-loop
+mechanisms (``<vjm:closure>``), with dead loads anywhere: serial chains without dead loads
+run on :class:`~vjm_pin.solver.EquilibriumSolver` (the blocks of eq. 30), everything else on
+:class:`~vjm_pin.solver.mechanism.MechanismSolver` (:mod:`vjm_pin.analysis.mechanism_curve`:
+eq. 23, the margin ``μ`` and the tangent of eq. 28 with the closure rows added). Below, "the
+end held" means the control as run: every task component held, or with ``free=True`` only the
+component along ``d`` (the other task components then carry zero wrench).
 
 The curve
 ---------
@@ -66,15 +74,17 @@ branch at ``s_c ∓ ε``, ``ε = max(`` :data:`OFFSET_REL` ``·|s_c|,`` :data:`O
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from vjm_pin.exceptions import InputError, NoEquilibrium, SingularStiffness
 from vjm_pin.kinematics.chain import flush_tiny
+from vjm_pin.kinematics.dead_loads import Load
 from vjm_pin.model.format import VjmModel
 from vjm_pin.solver.equilibrium import EquilibriumResult, EquilibriumSolver
+from vjm_pin.solver.mechanism import MechanismSolver
 from vjm_pin.solver.stability import (
     RANK_TOL,
     STABILITY_TOL,
@@ -119,11 +129,12 @@ class CurvePoint:
             ``dᵀ F``: positive when it pushes the end along the direction.
         wrench: (6,) full external wrench at equilibrium (N, N·m), world axes.
         stable: Verdict for the control as run: the end held in every task component
-            (deflection-driven), i.e. eq. (23).
+            (deflection-driven), i.e. eq. (23); with ``free=True`` only along the direction.
         stiffness: Tangent stiffness ``dᵀ K_C d`` (N/m) with K_C of eq. (30); ``inf`` when
             the end cannot move along ``d`` to first order (straight chain of rigid
             links), ``nan`` when K_C is singular for another reason.
-        equilibrium: The :class:`EquilibriumResult`.
+        equilibrium: The :class:`EquilibriumResult` (serial path) or
+            :class:`~vjm_pin.solver.mechanism.MechanismResult` (mechanism path).
         stable_end_held: Eq. (23) alone (the end held in every task component).
         force_control_margin: ``−μ``: minus the largest eigenvalue of the Hessian of the
             total potential on the displacements that keep the components orthogonal to
@@ -176,12 +187,16 @@ class Curve:
         points: The followed (stable when one exists) branch, ``s = 0 … max_deflection``.
         critical: Critical points found on it (see the module docstring for the rule).
         branches: Unstable (or other) branches traced with ``all_branches=True``; else ``()``.
+        free: The task frame was held only along the direction (``trace_curve(free=True)``).
+        loads: The dead loads (:class:`~vjm_pin.kinematics.dead_loads.Load`) it was traced under.
     """
 
     direction: np.ndarray
     points: tuple[CurvePoint, ...]
     critical: tuple[CriticalPoint, ...]
     branches: tuple[tuple[CurvePoint, ...], ...] = ()
+    free: bool = False
+    loads: tuple = ()
 
     @property
     def deflections(self) -> np.ndarray:
@@ -884,64 +899,14 @@ def _unloaded(vm, solver, d, kin) -> EquilibriumResult | None:
     return probe
 
 
-@one_blas_thread
-def trace_curve(
-    vm: VjmModel,
-    direction,
-    max_deflection: float,
-    steps: int = 100,
-    *,
-    solver: EquilibriumSolver | None = None,
-    refine_tol: float = 1e-4,
-    all_branches: bool = False,
-    progress: Callable[[int, int], None] | None = None,
-) -> Curve:
-    """Trace the force–deflection curve of ``vm`` along ``direction`` (paper §6.1, Fig. 4–5).
-
-    The followed branch and its critical points are defined in the module docstring;
-    they do not depend on ``steps``, which only sets where the curve is reported.
-
-    Args:
-        vm: The model.
-        direction: (3,) or (6,) direction of the end deflection, world axes; normalised;
-            must lie in the task components and be a pure translation or rotation.
-        max_deflection: Final deflection along the direction (m or rad), > 0.
-        steps: Number of equal steps (the curve has ``steps + 1`` points, from 0).
-        solver: Equilibrium solver (default ``EquilibriumSolver(vm)``, follows the stable
-            branch); used for the start and for branch switches.
-        refine_tol: Relative force tolerance of the critical points (they are located
-            to ``1e-3·refine_tol``).
-        all_branches: Also trace the branches that leave each critical point
-            (unstable ones, as in Fig. 4) into ``Curve.branches``.
-        progress: Optional ``callable(done, total)`` called after every step.
-
-    Returns:
-        The :class:`Curve`.
-
-    Raises:
-        InputError: bad direction, range, steps or tolerance.
-        NoEquilibrium: no equilibrium at some point of the range.
-    """
-    d = _direction(vm, direction)
-    if not np.isfinite(max_deflection) or max_deflection <= 0:
-        raise InputError(
-            f"max_deflection must be a positive number (m or rad), got {max_deflection}"
-        )
-    if int(steps) != steps or steps < 1:
-        raise InputError(f"steps must be a positive integer, got {steps}")
-    steps = int(steps)
-    if not refine_tol > 0:
-        raise InputError(f"refine_tol must be positive, got {refine_tol}")
-    solver = solver or EquilibriumSolver(vm)
-    kin = solver.kin
-    s_grid = [max_deflection * i / steps for i in range(steps + 1)]
-    tr = _Tracer(vm, d, max_deflection, solver, refine_tol)
+def _follow(tr: _Tracer, first: _BP, rigid: bool, s_grid, progress, make_point):
+    """The followed branch from ``first`` over ``s_grid`` and its critical points (module
+    docstring): ``(points, critical)``; ``make_point(bp, thr)`` builds a :class:`CurvePoint`."""
+    steps = len(s_grid) - 1
     critical: list[CriticalPoint] = []
-    probe = _unloaded(vm, solver, d, kin)
-    first = tr.point(probe if probe is not None else solver.solve(0.0 * d), 0.0)
-    points = [_curve_point(first, tr.thr)]
+    points = [make_point(first, tr.thr)]
     cur = first
-    if probe is not None or not np.isfinite(first.k):
+    if rigid:
         # rigid along d at the start: search along the force at the unloaded configuration
         found = tr.rigid_start(first) if first.mu < 0 else None
         s1 = s_grid[1]
@@ -970,9 +935,118 @@ def trace_curve(
         progress(1, steps + 1)
     for i, s in enumerate(s_grid[1:], start=1):
         cur = tr.advance(cur, s, i, critical)
-        points.append(_curve_point(cur, tr.thr))
+        points.append(make_point(cur, tr.thr))
         if progress is not None:
             progress(i + 1, steps + 1)
-    points = tuple(points)
+    return tuple(points), critical
+
+
+def _trace_mechanism(vm, d, max_deflection, steps, solver, refine_tol, all_branches, progress, loads, gravity, free):
+    """:func:`trace_curve` on :class:`~vjm_pin.solver.mechanism.MechanismSolver`
+    (:mod:`vjm_pin.analysis.mechanism_curve`)."""
+    from vjm_pin.analysis.mechanism_curve import MechanismTracer, check_free_direction, curve_point
+
+    if all_branches:
+        raise InputError(
+            "all_branches (the unstable branches) is only traced for serial chains without dead loads"
+        )
+    if solver is None:
+        solver = MechanismSolver(vm, loads=loads, gravity=gravity)
+    elif not isinstance(solver, MechanismSolver):
+        raise InputError(
+            "this curve needs the mechanism solver (loop closures, dead loads or a free task frame): "
+            "pass a MechanismSolver as solver, or none"
+        )
+    elif loads or gravity is not None:
+        raise InputError("give the dead loads and gravity to the MechanismSolver passed as solver, not twice")
+    if solver.vm is not vm:
+        raise InputError("the solver was built for another model")
+    if free:
+        check_free_direction(d)
+    tr = MechanismTracer(vm, d, max_deflection, solver, refine_tol, bool(free))
+    s_grid = [max_deflection * i / steps for i in range(steps + 1)]
+    first, rigid = tr.start()
+    points, critical = _follow(tr, first, rigid or not np.isfinite(first.k), s_grid, progress, curve_point)
+    return Curve(direction=d, points=points, critical=tuple(critical), free=bool(free),
+                 loads=tuple(solver.loads.loads))
+
+
+@one_blas_thread
+def trace_curve(
+    vm: VjmModel,
+    direction,
+    max_deflection: float,
+    steps: int = 100,
+    *,
+    solver: EquilibriumSolver | MechanismSolver | None = None,
+    refine_tol: float = 1e-4,
+    all_branches: bool = False,
+    progress: Callable[[int, int], None] | None = None,
+    loads: Sequence[Load] = (),
+    gravity=None,
+    free: bool = False,
+) -> Curve:
+    """Trace the force–deflection curve of ``vm`` along ``direction`` (paper §6.1, Fig. 4–5).
+
+    The followed branch and its critical points are defined in the module docstring;
+    they do not depend on ``steps``, which only sets where the curve is reported.
+
+    Args:
+        vm: The model.
+        direction: (3,) or (6,) direction of the end deflection, world axes; normalised;
+            must lie in the task components and be a pure translation or rotation.
+        max_deflection: Final deflection along the direction (m or rad), > 0.
+        steps: Number of equal steps (the curve has ``steps + 1`` points, from 0).
+        solver: Equilibrium solver (default ``EquilibriumSolver(vm)`` for a serial chain,
+            ``MechanismSolver(vm, loads, gravity)`` otherwise; follows the stable branch);
+            used for the start and for branch switches.
+        refine_tol: Relative force tolerance of the critical points (they are located
+            to ``1e-3·refine_tol``).
+        all_branches: Also trace the branches that leave each critical point
+            (unstable ones, as in Fig. 4) into ``Curve.branches``.
+        progress: Optional ``callable(done, total)`` called after every step.
+        loads: Dead loads anywhere (:class:`~vjm_pin.kinematics.dead_loads.Load`, world axes).
+        gravity: (3,) gravity (m/s²) for the link weights, or None.
+        free: Hold the task frame only along ``d`` (a translation); the other task
+            components carry zero wrench (the free-platform curve of a parallel robot).
+            ``stable`` is then the verdict with only ``d`` held, and the force-control margin
+            ``μ`` is judged with nothing held but the closures.
+
+    Models with loop closures, dead loads, gravity or ``free`` are traced on
+    :class:`~vjm_pin.solver.mechanism.MechanismSolver` (:mod:`vjm_pin.analysis.mechanism_curve`:
+    the same continuation, critical-point rule and branch switch, with the closure rows in
+    eq. 23, in the margin μ and in the bordered tangent of eq. 28); serial chains without them
+    on :class:`EquilibriumSolver` as before.
+
+    Returns:
+        The :class:`Curve`.
+
+    Raises:
+        InputError: bad direction, range, steps or tolerance; ``all_branches`` or a serial
+            solver with closures, dead loads or ``free``.
+        NoEquilibrium: no equilibrium at some point of the range.
+    """
+    d = _direction(vm, direction)
+    if not np.isfinite(max_deflection) or max_deflection <= 0:
+        raise InputError(
+            f"max_deflection must be a positive number (m or rad), got {max_deflection}"
+        )
+    if int(steps) != steps or steps < 1:
+        raise InputError(f"steps must be a positive integer, got {steps}")
+    steps = int(steps)
+    if not refine_tol > 0:
+        raise InputError(f"refine_tol must be positive, got {refine_tol}")
+    if free or loads or gravity is not None or getattr(vm, "closures", ()) or isinstance(solver, MechanismSolver):
+        return _trace_mechanism(
+            vm, d, max_deflection, steps, solver, refine_tol, all_branches, progress, loads, gravity, free
+        )
+    solver = solver or EquilibriumSolver(vm)
+    kin = solver.kin
+    s_grid = [max_deflection * i / steps for i in range(steps + 1)]
+    tr = _Tracer(vm, d, max_deflection, solver, refine_tol)
+    probe = _unloaded(vm, solver, d, kin)
+    first = tr.point(probe if probe is not None else solver.solve(0.0 * d), 0.0)
+    rigid = probe is not None or not np.isfinite(first.k)
+    points, critical = _follow(tr, first, rigid, s_grid, progress, _curve_point)
     branches = _other_branches(vm, d, points, critical, s_grid, kin, solver) if all_branches else ()
     return Curve(direction=d, points=points, critical=tuple(critical), branches=branches)

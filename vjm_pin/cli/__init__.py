@@ -160,10 +160,12 @@ def _run(argv) -> int:
 
 def _hint(e) -> str:
     """Where the command line lists the names an error did not find."""
-    from vjm_pin.model.robots import UnknownRobot
+    from vjm_pin.exceptions import AmbiguousFrame, UnknownRobot
 
     if isinstance(e, UnknownRobot):
         return "see 'vjm-pin models' and 'vjm-pin models --robots'"
+    if isinstance(e, AmbiguousFrame):
+        return "give it with --frame"
     return ""
 
 

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from vjm_pin.cli.common import MAX_SUBDIVIDE, int_range
+from vjm_pin.cli.common import MAX_SUBDIVIDE, add_load_option, int_range
 
 EXAMPLES = (
     "vjm-pin analyze paper-a-s --deflection -0.001 0 0",
-    "vjm-pin analyze ur5 --q shoulder_lift_joint=-1 elbow_joint=1 --wrench 0 0 -100 --json",
     "vjm-pin analyze orthoglide-q0 --wrench -100 -100 -100 --json",
+    "vjm-pin analyze portal-frame --wrench 100 0 0 --load top_left 0 0 -100 --load top_right 0 0 -100",
 )
 
 #: Keys of every ``analyze --json`` object, whatever the model kind and solver path (null
@@ -19,7 +19,8 @@ KEYS = (
     "wrench", "deflection", "payload", "gravity", "stable", "stable_end_held",
     "stability_eigenvalues", "stability_end_held_eigenvalues", "warnings", "checks",
     "residual", "energy", "q", "theta", "stiffness", "stiffness_note", "stiffness_unloaded",
-    "stiffness_unloaded_note", "weakest", "pose", "pose_name", "legs", "unstable_legs",
+    "stiffness_unloaded_note", "weakest", "pose", "pose_name", "loads", "closures", "redundant",
+    "multipliers_note",
 )
 
 #: The quantities with units in ``analyze --json`` (:data:`vjm_pin.cli.common.UNITS`).
@@ -27,6 +28,14 @@ UNIT_KEYS = (
     "deflection", "wrench", "stiffness", "stiffness_along", "compliance_eigenvalues", "q",
     "theta", "energy", "payload", "direction", "stability_eigenvalues",
 )
+
+#: Units of the keys of ``analyze --json`` that only this command has.
+OWN_UNITS = {
+    "loads": "N (moment components: N·m), world axes, force at the frame origin",
+    "multipliers": "N on translation rows, N·m on rotation rows (closure components in frame_b's axes)",
+    "wrench_a": "N (moment components: N·m), world axes, at frame_a's origin",
+    "wrench_b": "N (moment components: N·m), world axes, at frame_b's origin",
+}
 
 
 def analyze_json(body: dict) -> dict:
@@ -37,7 +46,10 @@ def analyze_json(body: dict) -> dict:
     extra = set(body) - set(KEYS)
     if extra:
         raise AssertionError(f"analyze: keys outside the vocabulary: {sorted(extra)}")
-    return envelope("analyze", {k: body.get(k) for k in KEYS}, UNIT_KEYS)
+    from vjm_pin.cli.common import UNITS
+
+    units = {**{k: UNITS[k] for k in UNIT_KEYS}, **OWN_UNITS}
+    return envelope("analyze", {k: body.get(k) for k in KEYS}, units)
 
 
 def add_robot_options(p) -> None:
@@ -76,11 +88,17 @@ def add_parser(sub):
         description=(
             "Solve the loaded equilibrium of MODEL (eq. 5) for a prescribed end deflection (every task "
             "component held), or for a dead wrench (every task component loaded; Newton on the total "
-            "potential), check it and report two stability verdicts: 'stable' for the control as run "
-            "and 'stable_end_held' (eq. 23), and the loaded Cartesian stiffness (eq. 30). Deflection: from the unloaded end location, world axes, m and rad (rotation "
-            "vector). Wrench: force at the end frame origin and moment, world axes, N and N·m. "
-            "Without --deflection/--wrench the end wrench is zero. --payload and --gravity add dead "
-            "loads (eq. 5' and 28' of vjm_pin.loads)."
+            "potential), and report two stability verdicts: 'stable' for the control as run "
+            "and 'stable_end_held' (eq. 23), and the loaded Cartesian stiffness (eq. 30). Every model "
+            "kind: open chains, robots, mechanisms with loop closures (parallel robots, closed loops: "
+            "one Newton over the whole mechanism, closure reactions in the output). Deflection: from "
+            "the unloaded end location, world axes, m and rad (rotation vector). Wrench: force at the "
+            "end frame origin and moment, world axes, N and N·m. --load, --payload and --gravity add "
+            "dead loads anywhere; without --deflection/--wrench the end is then free (zero end wrench), "
+            "else held at its unloaded location. Open chains loaded at the end only are solved by the "
+            "serial solver and checked (residuals, verdicts, K_C against re-solved equilibria); models "
+            "with closures or dead loads by the mechanism solver (K_C: eq. 28 bordered with the closure "
+            "rows)."
         ),
     )
     add_robot_options(p)
@@ -101,13 +119,16 @@ def add_parser(sub):
     p.add_argument(
         "--gravity",
         action="store_true",
-        help="load every link with its weight at its centre of mass (URDF inertials)",
+        help="load every link with its weight at its centre of mass (URDF inertials; 9.80665 m/s² along −z)",
     )
+    add_load_option(p)
     p.add_argument(
         "--method",
         choices=("eq30", "eq32", "eq33"),
-        default="eq30",
-        help="stiffness formula (default eq30)",
+        default=None,
+        help="stiffness formula (default: eq30 for an open chain loaded at its end only; models with "
+        "closures or dead loads: eq. 28 bordered with the closure rows, and eq30/eq32/eq33 with the "
+        "closure rows bordered like passive joints; all agree where defined)",
     )
     p.add_argument(
         "--subdivide",
@@ -161,7 +182,7 @@ def analysis_dict(vm, res, method="eq30") -> dict:
 
     out = {
         "model": vm.name,
-        "parallel": False,
+        "parallel": bool(vm.closures),
         "frame": vm.frame,
         "task": vm.task_names,
         "converged": res.converged,
@@ -195,55 +216,9 @@ def analysis_dict(vm, res, method="eq30") -> dict:
     return out
 
 
-def loaded_dict(vm, eq, method="eq30", gravity=False, loads=None) -> dict:
-    """The JSON object of ``analyze`` for a :class:`~vjm_pin.loads.LoadedEquilibrium`
-    (every task component loaded: ``stable`` is ``K − H − H^G`` positive definite,
-    ``stable_end_held`` eq. 23)."""
-    from vjm_pin.exceptions import SingularStiffness
-    from vjm_pin.loads import LinkLoads, loaded_blocks
-    from vjm_pin.solver import unloaded_stiffness
-    from vjm_pin.solver.stability import check_stability_held
-
-    b = loaded_blocks(vm, eq.x, eq.wrench, loads if loads is not None else LinkLoads(np.zeros(3)))
-    free = check_stability_held(b, np.zeros((0, len(vm.task))))
-
-    out = {
-        "model": vm.name,
-        "parallel": False,
-        "frame": vm.frame,
-        "task": vm.task_names,
-        "converged": True,
-        "iterations": eq.iterations,
-        "path": "newton(eq. 5')" + ("+gravity" if gravity else ""),
-        "wrench": eq.wrench,
-        "deflection": eq.deflection,
-        "control": control_dict(vm, ()),
-        "stable": free.stable,
-        "stable_end_held": eq.stable,
-        "stability_eigenvalues": free.eigenvalues,
-        "stability_end_held_eigenvalues": eq.stability.eigenvalues,
-        "warnings": [] if free.stable else ["unstable under the prescribed loads (the end is free under them)"],
-        "residual": {"statics": eq.residual},
-        "q": dict(zip(vm.q_names, np.asarray(eq.x, float)[vm.q_idx])),
-        "theta": dict(zip(vm.theta_names, eq.theta)),
-        "gravity": gravity,
-    }
-    if eq.stiffness is None:
-        out["stiffness"] = None
-        out["stiffness_note"] = "the loaded stiffness matrix of eq. (28') is singular"
-    else:
-        out["stiffness"] = eq.stiffness.stiffness
-    try:
-        out["stiffness_unloaded"] = unloaded_stiffness(vm, method).stiffness
-    except SingularStiffness as e:
-        out["stiffness_unloaded"] = None
-        out["stiffness_unloaded_note"] = str(e)
-    return out
-
-
-def load_from_args(args, allow_closures=False):
-    """(vm, robot) for the model options of ``args`` (see :func:`add_robot_options`); models
-    with loop closures only with ``allow_closures`` (:func:`vjm_pin.model.registry.resolve`)."""
+def load_from_args(args):
+    """(vm, robot) for the model options of ``args`` (see :func:`add_robot_options`): every model
+    kind (open chains, robots, mechanisms with loop closures; :func:`vjm_pin.model.registry.resolve`)."""
     from vjm_pin.model.registry import resolve
     from vjm_pin.model.robots import parse_q
 
@@ -253,97 +228,170 @@ def load_from_args(args, allow_closures=False):
         q=parse_q(args.q),
         pose_name=args.pose_name,
         springs=args.springs,
-        allow_closures=allow_closures,
     )
 
 
-def run(args) -> int:
-    from vjm_pin.exceptions import InputError
-    from vjm_pin.loads import LinkLoads, payload_wrench, solve_loaded
-    from vjm_pin.solver import EquilibriumSolver
-    from vjm_pin.cli.common import finite_vector
-    from vjm_pin.cli.parallel_cmds import is_parallel_model, run_analyze
+#: Frame names shown in an unknown-frame message (the rest are counted).
+SHOWN_FRAMES = 12
 
-    if is_parallel_model(args.model):  # parallel robots (<vjm:leg> tags): vjm_pin/cli/parallel_cmds.py
-        return run_analyze(args)
-    vm, robot = load_from_args(args, allow_closures=True)
-    if vm.closures:  # a closed mechanism: vjm_pin.solver.MechanismSolver
-        return _run_mechanism(args, vm)
+
+def check_load_frames(vm, loads, option: str = "--load") -> None:
+    """Every load frame exists in ``vm``; else an :class:`~vjm_pin.exceptions.InputError` naming
+    the frame, the closest names (did you mean) and some frames of the model (one line)."""
+    import difflib
+
+    from vjm_pin.exceptions import InputError
+
+    names = list(dict.fromkeys(f.name for f in vm.model.frames if f.name != "universe"))
+    for ld in loads:
+        if vm.model.existFrame(ld.frame):
+            continue
+        close = difflib.get_close_matches(ld.frame, names, n=3, cutoff=0.6)
+        hint = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
+        more = f" (+{len(names) - SHOWN_FRAMES} more)" if len(names) > SHOWN_FRAMES else ""
+        raise InputError(
+            f"{option}: unknown frame '{ld.frame}' in model '{vm.name}'{hint} "
+            f"(frames: {', '.join(names[:SHOWN_FRAMES])}{more})"
+        )
+
+
+def dead_loads_from_args(args, vm) -> tuple[tuple, object]:
+    """``(loads, gravity)`` of ``--load``, ``--payload`` (the weight of a point mass at the end frame
+    origin, kg) and ``--gravity`` (link weights, standard gravity along −z): the dead loads of
+    :class:`~vjm_pin.solver.MechanismSolver`. Frames are checked (:func:`check_load_frames`).
+
+    Raises:
+        InputError: a malformed ``--load``, an unknown frame, a negative or non-finite payload.
+    """
+    import math
+
+    from vjm_pin.cli.common import loads_from_args
+    from vjm_pin.exceptions import InputError
+    from vjm_pin.kinematics.dead_loads import STANDARD_GRAVITY, Load
+
+    loads = list(loads_from_args(args))
+    check_load_frames(vm, loads)
+    payload = getattr(args, "payload", None)
+    if payload is not None:
+        if not (math.isfinite(payload) and payload >= 0):
+            raise InputError(f"--payload must be a finite non-negative mass in kg, got {payload}")
+        loads.append(Load.weight(vm.frame, payload))
+    gravity = (0.0, 0.0, -STANDARD_GRAVITY) if getattr(args, "gravity", False) else None
+    return tuple(loads), gravity
+
+
+def loads_list(args, loads) -> list[dict]:
+    """The dead loads as JSON: ``{"frame", "wrench" (6, N and N·m, world axes), "source"}`` with
+    source ``"load"`` (``--load``) or ``"payload"`` (``--payload``, the last one)."""
+    n_payload = 1 if getattr(args, "payload", None) is not None else 0
+    return [
+        {"frame": ld.frame, "wrench": ld.wrench, "source": "payload" if i >= len(loads) - n_payload else "load"}
+        for i, ld in enumerate(loads)
+    ]
+
+
+def closures_list(vm, res) -> list[dict] | None:
+    """The closures of ``vm`` at the equilibrium ``res`` (a
+    :class:`~vjm_pin.solver.MechanismResult`) as JSON: name, frames, held components, the
+    multiplier of each component (N on translation rows, N·m on rotation rows; minimum-norm when
+    the rows are redundant) and the reaction wrenches on ``frame_a`` and ``frame_b`` (6, N and
+    N·m, world axes, at the frame origins). None for a model without closures."""
+    if not vm.closures:
+        return None
+    mu = dict(zip(res.closure_labels, np.asarray(res.closure_multipliers, float)))
+    out = []
+    for c in vm.closures:
+        wa, wb = res.reaction_wrenches[c.name]
+        out.append(
+            {
+                "name": c.name,
+                "frame_a": c.frame_a,
+                "frame_b": c.frame_b,
+                "components": list(c.components),
+                "multipliers": {comp: mu[f"{c.name}.{comp}"] for comp in c.components},
+                "wrench_a": wa,
+                "wrench_b": wb,
+            }
+        )
+    return out
+
+
+def run(args) -> int:
+    """``vjm-pin analyze`` (one path): :class:`~vjm_pin.solver.MechanismSolver` for a model with
+    loop closures or under dead loads (``--load``, ``--payload``, ``--gravity``),
+    :class:`~vjm_pin.solver.EquilibriumSolver` (with its checks and eq. 30/32/33) for an open chain
+    loaded at its end only."""
+    from vjm_pin.analysis.indices import lost_directions, name_direction
+    from vjm_pin.cli.common import finite_vector
+    from vjm_pin.exceptions import InputError
+    from vjm_pin.model.format import COMPONENTS
+    from vjm_pin.solver import EquilibriumSolver
+
+    vm, robot = load_from_args(args)
     if args.subdivide != 1:
+        if vm.closures:
+            raise InputError("--subdivide is not available for models with loop closures")
         from vjm_pin.model.subdivide import subdivide_model
 
-        if args.subdivide < 1:
-            raise InputError(f"--subdivide must be a positive integer, got {args.subdivide}")
         vm = subdivide_model(vm.urdf, args.subdivide)
-    extra = args.payload is not None or args.gravity
-    if extra and args.deflection is not None:
-        raise InputError("--payload/--gravity take a --wrench (or none), not a --deflection")
-    if args.deflection is not None or (args.wrench is None and not extra):
+    loads, gravity = dead_loads_from_args(args, vm)
+    method = args.method or "eq30"
+    if vm.closures or loads or gravity is not None:
+        out = _run_mechanism(args, vm, loads, gravity)
+    elif args.deflection is not None or args.wrench is None:
         # every task component held (no load at all: the end held at its unloaded location)
         solver = EquilibriumSolver(vm)
         d = np.zeros(6) if args.deflection is None else finite_vector(args.deflection, "--deflection")
-        res = solver.verify(solver.solve(d), method=args.method)
-        out = analysis_dict(vm, res, args.method)
-    else:
-        w = np.zeros(6) if args.wrench is None else finite_vector(args.wrench, "--wrench")
-        if args.payload is not None:
-            w = w + payload_wrench(args.payload)
-        if extra:  # link loads: Newton on eq. (5') (springs and motors only, vjm_pin.loads)
-            loads = LinkLoads.earth() if args.gravity else None
-            eq = solve_loaded(vm, w, loads, method=args.method)
-            out = loaded_dict(vm, eq, args.method, args.gravity, loads)
-        else:  # every task component loaded: Newton on the total potential
-            solver = EquilibriumSolver(vm)
-            res = solver.verify(solver.solve_wrench(w), method=args.method)
-            out = analysis_dict(vm, res, args.method)
-    from vjm_pin.analysis.indices import lost_directions, name_direction
-    from vjm_pin.model.format import COMPONENTS
-
+        res = solver.verify(solver.solve(d), method=method)
+        out = analysis_dict(vm, res, method)
+    else:  # every task component loaded: Newton on the total potential
+        solver = EquilibriumSolver(vm)
+        res = solver.verify(solver.solve_wrench(finite_vector(args.wrench, "--wrench")), method=method)
+        out = analysis_dict(vm, res, method)
     # a robot's default task drops the directions its pose cannot move (robots.default_task)
     lost = [name_direction(v, COMPONENTS) for v in lost_directions(vm)] if robot is not None else []
     out["weakest"] = weakest_direction(out["stiffness"], vm.task, lost)
     if robot is not None:
         out["pose"] = robot.pose
         out["pose_name"] = robot.pose_name
+    out["loads"] = loads_list(args, loads)
     return _emit(args, vm, robot, out)
 
 
-def _run_mechanism(args, vm) -> int:
-    """``analyze`` of a model with loop closures (:class:`~vjm_pin.solver.MechanismSolver`): every
-    task component held for ``--deflection`` (or no load), loaded for ``--wrench``; ``--payload``
-    and ``--gravity`` are dead loads (a weight at the end frame, the link weights)."""
-    from vjm_pin.kinematics.dead_loads import STANDARD_GRAVITY, Load
-    from vjm_pin.exceptions import InputError, SingularStiffness
-    from vjm_pin.solver import MechanismSolver
+def _run_mechanism(args, vm, loads, gravity) -> dict:
+    """``analyze`` through :class:`~vjm_pin.solver.MechanismSolver` (closures, dead loads): every
+    task component held for ``--deflection``, loaded for ``--wrench``; without either, loaded (zero
+    task wrench: the task frame carries the dead loads) when there are dead loads, else held at
+    its reference. K_C: eq. (28) bordered with the closure rows, or ``--method`` eq. (30), (32),
+    (33) with the closure rows bordered like passive joints (:meth:`MechanismSolver.stiffness`)."""
     from vjm_pin.cli.common import finite_vector
+    from vjm_pin.exceptions import SingularStiffness
+    from vjm_pin.solver import MechanismSolver, unloaded_stiffness
 
-    if args.subdivide != 1:
-        raise InputError("--subdivide is not available for models with loop closures")
-    extra = args.payload is not None or args.gravity
-    if extra and args.deflection is not None:
-        raise InputError("--payload/--gravity take a --wrench (or none), not a --deflection")
-    loads = [Load.weight(vm.frame, args.payload)] if args.payload is not None else []
-    solver = MechanismSolver(vm, loads, (0.0, 0.0, -STANDARD_GRAVITY) if args.gravity else None)
-    if args.deflection is not None or (args.wrench is None and not extra):
-        d = np.zeros(6) if args.deflection is None else finite_vector(args.deflection, "--deflection")
-        res = solver.solve(deflection=d)
-    else:
-        w = np.zeros(len(vm.task)) if args.wrench is None else finite_vector(args.wrench, "--wrench")
+    method = args.method or "eq28"
+    solver = MechanismSolver(vm, loads, gravity)
+    if args.deflection is not None:
+        res = solver.solve(deflection=finite_vector(args.deflection, "--deflection"))
+    elif args.wrench is not None or loads or gravity is not None:
+        w = np.zeros(6) if args.wrench is None else finite_vector(args.wrench, "--wrench")
         res = solver.solve(wrench=w)
+    else:
+        res = solver.solve(deflection=np.zeros(6))
     out = analysis_dict_mechanism(vm, res)
 
     def unloaded():
+        if not vm.closures:  # the open chain at its reference: eq. (30) with H = 0
+            return unloaded_stiffness(vm, args.method or "eq30")
         bare = MechanismSolver(vm)
-        return bare.stiffness(bare.solve(deflection=np.zeros(6)))
+        return bare.stiffness(bare.solve(deflection=np.zeros(6)), method=method)
 
-    for key, fn in (("stiffness", lambda: solver.stiffness(res)), ("stiffness_unloaded", unloaded)):
+    for key, fn in (("stiffness", lambda: solver.stiffness(res, method=method)), ("stiffness_unloaded", unloaded)):
         try:
             out[key] = fn().stiffness
         except SingularStiffness as e:
             out[key] = None
             out[key + "_note"] = str(e)
-    out["weakest"] = weakest_direction(out["stiffness"], vm.task, [])
-    return _emit(args, vm, None, out)
+    return out
 
 
 def _emit(args, vm, robot, out) -> int:
@@ -362,11 +410,11 @@ def _emit(args, vm, robot, out) -> int:
 
 def analysis_dict_mechanism(vm, res) -> dict:
     """The JSON object of ``analyze`` for a :class:`~vjm_pin.solver.MechanismResult` (stiffness
-    keys filled by the caller); redundant closure rows and the multiplier choice as warnings."""
-    notes = [res.multipliers_note] if res.multipliers_note else []
+    keys filled by the caller): closure multipliers and reactions, the redundant constraint rows
+    and, with redundant rows, the note that the multipliers are the minimum-norm set."""
     return {
         "model": vm.name,
-        "parallel": False,
+        "parallel": bool(vm.closures),
         "frame": vm.frame,
         "task": vm.task_names,
         "converged": res.converged,
@@ -381,12 +429,15 @@ def analysis_dict_mechanism(vm, res) -> dict:
         "stability_end_held_eigenvalues": None
         if res.stability_end_held is None
         else res.stability_end_held.eigenvalues,
-        "warnings": list(res.warnings) + notes,
+        "warnings": list(res.warnings),
         "checks": {},
         "residual": res.residuals,
         "energy": res.energy,
         "q": dict(zip(vm.q_names, res.q)),
         "theta": dict(zip(vm.theta_names, res.theta)),
+        "closures": closures_list(vm, res),
+        "redundant": list(res.redundant),
+        "multipliers_note": res.multipliers_note,
     }
 
 
@@ -398,6 +449,22 @@ def _summary(args, out) -> None:
     summary(args, f"{out['model']}: {'converged' if out.get('converged') else 'NOT converged'}, {verdict}")
 
 
+#: Stability eigenvalues shown in the text output (the largest: the ones that decide; all in --json).
+SHOWN_EIGENVALUES = 6
+
+
+def _eigenvalues_text(ev) -> str:
+    """``"; eigenvalues [...]"`` for the text output: all of them, or the largest
+    :data:`SHOWN_EIGENVALUES` of a large mechanism (the verdict's margin) and their count."""
+    if ev is None or not len(ev):
+        return ""
+    ev = np.sort(np.asarray(ev, float))
+    if ev.size <= SHOWN_EIGENVALUES:
+        return f"; eigenvalues {np.array2string(ev, precision=4)}"
+    top = np.array2string(ev[-SHOWN_EIGENVALUES:], precision=4)
+    return f"; largest {SHOWN_EIGENVALUES} of {ev.size} eigenvalues {top} (all in --json)"
+
+
 def _human(vm, robot, out, fmt_matrix) -> str:
     d = np.asarray(out["deflection"], float)
     w = np.asarray(out["wrench"], float)
@@ -405,15 +472,26 @@ def _human(vm, robot, out, fmt_matrix) -> str:
     if robot is not None:
         pose = ", ".join(f"{k}={v:.4g}" for k, v in robot.pose.items() if k in vm.joint_names)
         lines.append(f"pose {robot.pose_name or '(given/default)'}: {pose or 'all joints at 0'}")
-    loads = []
+    extra = []
     if out.get("payload") is not None:
-        loads.append(f"payload {out['payload']:g} kg")
+        extra.append(f"payload {out['payload']:g} kg")
     if out.get("gravity"):
-        loads.append("link weights (gravity)")
+        extra.append("link weights (gravity)")
     lines.append(
         f"end wrench [N, N, N, N·m, N·m, N·m]: {np.array2string(w, precision=4)}"
-        + (f"  (+ {', '.join(loads)})" if loads else "")
+        + (f"  (+ {', '.join(extra)})" if extra else "")
     )
+    for ld in out.get("loads") or ():
+        if ld["source"] == "load":
+            lines.append(
+                f"dead load at '{ld['frame']}' [N, N·m, world axes]: {np.array2string(np.asarray(ld['wrench']), precision=4)}"
+            )
+    for c in out.get("closures") or ():
+        mu = ", ".join(f"{k} {v:.6g}" for k, v in c["multipliers"].items())
+        lines.append(
+            f"closure {c['name']} ({c['frame_a']} on {c['frame_b']}): multipliers [N, N·m] {mu}; reaction on "
+            f"{c['frame_a']} [N, N·m, world] {np.array2string(np.asarray(c['wrench_a']), precision=4)}"
+        )
     lines.append(f"equilibrium: {out['path']}, {out['iterations']} iterations")
     lines.append(
         f"deflection: translation {np.array2string(d[:3] * 1e3, precision=4)} mm (|d| = {np.linalg.norm(d[:3]) * 1e3:.4g} mm), "
@@ -426,20 +504,16 @@ def _human(vm, robot, out, fmt_matrix) -> str:
         )
     if out.get("stable") is not None:
         verdict = "stable" if out["stable"] else "UNSTABLE"
-        ev = out.get("stability_eigenvalues")
-        extra = (
-            f"; eigenvalues {np.array2string(np.asarray(ev), precision=4)}"
-            if ev is not None and len(ev)
-            else ""
-        )
+        extra = _eigenvalues_text(out.get("stability_eigenvalues"))
         what = "stable (as controlled)" if ctl is not None and ctl["loaded"] else "stable (eq. 23, end held)"
         lines.append(f"{what}: {verdict}{extra}")
     if out.get("stable_end_held") is not None and ctl is not None and ctl["loaded"]:
-        ev = out.get("stability_end_held_eigenvalues")
-        extra = f"; eigenvalues {np.array2string(np.asarray(ev), precision=4)}" if ev is not None and len(ev) else ""
+        extra = _eigenvalues_text(out.get("stability_end_held_eigenvalues"))
         lines.append(
             f"stable_end_held (eq. 23): {'stable' if out['stable_end_held'] else 'UNSTABLE'}{extra}"
         )
+    if out.get("multipliers_note"):
+        lines.append(f"note: {out['multipliers_note']}")
     for note in out.get("warnings") or ():
         lines.append(f"warning: {note}")
     for key, label in (

@@ -11,14 +11,19 @@ from vjm_pin.exceptions import InputError
 
 
 def finite_vector(values, name: str, sizes=(3, 6)) -> np.ndarray:
-    """Floats from the command line; :class:`InputError` on NaN/inf or a wrong count."""
+    """Floats from the command line; :class:`InputError` on NaN/inf or a count not in
+    ``sizes``. 3 or 6 numbers (with 6 in ``sizes``) go through the library's one check,
+    :func:`vjm_pin.model.task.task_vector` (3 numbers: the rotation part zero); other counts
+    (one per task component) are returned as given."""
+    from vjm_pin.model.task import task_vector
+
     v = np.asarray([float(x) for x in values], dtype=float)
     if v.size not in sizes:
         raise InputError(f"{name} needs {' or '.join(map(str, sizes))} numbers, got {v.size}")
+    if v.size in (3, 6) and 6 in sizes:
+        return task_vector(v, name=name, outside_task="keep")
     if not np.all(np.isfinite(v)):
         raise InputError(f"{name} contains NaN or infinite values: {v.tolist()}")
-    if v.size == 3 and 6 in sizes:
-        v = np.concatenate([v, np.zeros(3)])
     return v
 
 
@@ -44,6 +49,20 @@ def int_range(lo: int, hi: int | None = None):
         return v
 
     return integer
+
+
+def float_range(lo: float, hi: float):
+    """An argparse ``type``: a finite number > 0 in ``[lo, hi]``; anything else is a usage
+    error (one line, exit 2) before any work."""
+    import argparse
+
+    def number(text: str) -> float:
+        v = positive_float(text)
+        if not lo <= v <= hi:
+            raise argparse.ArgumentTypeError(f"must be from {lo:g} to {hi:g}, got {text}")
+        return v
+
+    return number
 
 
 def positive_float(text: str) -> float:
@@ -75,7 +94,7 @@ OUTPUT_NOTE = "checked before the work starts, written atomically; an existing f
 def input_files(args) -> list:
     """The input files a command reads, from its ``args``: the model (a URDF path, or the file
     of a bundled model) and ``--springs``. Outputs must never be one of them."""
-    from vjm_pin.cli.parallel_cmds import model_path
+    from vjm_pin.model.registry import model_path
 
     files = []
     model = getattr(args, "model", None)

@@ -4,21 +4,36 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from vjm_pin.cli.common import MAX_SUBDIVIDE, OUTPUT_NOTE, int_range, positive_float
+from vjm_pin.cli.common import (
+    MAX_SUBDIVIDE,
+    OUTPUT_NOTE,
+    add_load_option,
+    float_range,
+    int_range,
+    positive_float,
+)
 
 EXAMPLES = (
     "vjm-pin curve paper-c-s --direction -1 0 0 --max-deflection 0.05 --steps 40 --plot curve.png",
     "vjm-pin curve paper-a-s --direction -1 0 0 --max-deflection 0.01 --steps 20 --json",
-    "vjm-pin curve orthoglide-q1 --direction -1 -1 -1 --max-deflection 0.001 --steps 2 --json",
+    "vjm-pin curve portal-frame --direction 1 0 0 --max-deflection 0.2 --steps 20 --load top_left 0 0 -50 "
+    "--load top_right 0 0 -50",
 )
 
-#: Keys of ``curve --json`` (serial and parallel models alike; null where a key does not
-#: apply): the object, each point (of ``points`` and of each of ``branches``), each critical
-#: point. ``stiffness`` (the 6×6 K_C) is in the points with ``--matrices`` only.
-CURVE_KEYS = ("model", "parallel", "direction", "free", "points", "critical", "branches", "stopped")
+#: Accepted ``--refine-tol``: the critical forces are located to ``1e-3·refine_tol``
+#: relative, so below 1e-10 rounding alone exceeds that; above 0.1 (10 %) it is no
+#: tolerance.
+REFINE_TOL_RANGE = (1e-10, 0.1)
+
+#: Keys of ``curve --json`` (every model kind alike; null where a key does not apply): the
+#: object, each point (of ``points`` and of each of ``branches``), each critical point.
+#: ``stiffness`` (the 6×6 K_C) is in the points with ``--matrices`` only.
+CURVE_KEYS = (
+    "model", "parallel", "direction", "free", "loads", "gravity", "points", "critical", "branches", "stopped",
+)
 POINT_KEYS = (
     "deflection", "force", "wrench", "stable", "stable_end_held", "force_control_margin",
-    "stiffness_along", "unstable_legs", "legs",
+    "stiffness_along",
 )
 CRITICAL_KEYS = (
     "force", "deflection", "stiffness_before", "stiffness_after", "index", "force_after", "kind",
@@ -42,7 +57,10 @@ def curve_json(body: dict) -> dict:
     body["points"] = [point(d) for d in body["points"]]
     body["branches"] = [[point(d) for d in br] for br in body["branches"] or []]
     body["critical"] = [{k: c.get(k) for k in CRITICAL_KEYS} for c in body["critical"]]
-    return envelope("curve", body, UNIT_KEYS)
+    from vjm_pin.cli.common import UNITS
+
+    units = {**{k: UNITS[k] for k in UNIT_KEYS}, "loads": "N (moment components: N·m), world axes, force at the frame origin"}
+    return envelope("curve", body, units)
 
 
 def add_parser(sub):
@@ -58,9 +76,18 @@ def add_parser(sub):
             "by root finding on that stability margin, independently of --steps. Every point reports "
             "'stable' (the end held, eq. 23) and the force-control margin. Units: m and N (rad and "
             "N·m for a rotation). The force is the external force along the direction that holds "
-            "the end there."
+            "the end there. Every model kind: open chains and mechanisms with loop closures "
+            "(parallel robots: the platform is the end). --load and --gravity add dead loads "
+            "anywhere, kept constant along the curve; --free holds only the component along "
+            "DIRECTION (the end free across it, no load there) instead of every task component."
         ),
     )
+    _add_options(p)
+    p.set_defaults(func=run)
+
+
+def _add_options(p) -> None:
+    """The arguments and options of ``vjm-pin curve``."""
     p.add_argument(
         "model", metavar="MODEL", help="VJM URDF path or bundled model name (see 'vjm-pin models')"
     )
@@ -94,13 +121,23 @@ def add_parser(sub):
         f"K from 1 to {MAX_SUBDIVIDE})",
     )
     p.add_argument(
-        "--held",
+        "--free",
         action="store_true",
-        help="parallel models: prescribe the whole platform displacement (nothing moves across "
-        "DIRECTION) instead of leaving the platform free across it (no load there)",
+        help="hold only the component along DIRECTION: the end (a parallel robot's platform) is free "
+        "across it, with no load there (default: every task component held, nothing moves across it)",
     )
     p.add_argument(
-        "--refine-tol", type=positive_float, default=1e-4, help="relative force tolerance of critical points"
+        "--gravity",
+        action="store_true",
+        help="load every link with its weight at its centre of mass (URDF inertials; 9.80665 m/s² along −z)",
+    )
+    add_load_option(p)
+    p.add_argument(
+        "--refine-tol",
+        type=float_range(*REFINE_TOL_RANGE),
+        default=1e-4,
+        help="relative force tolerance of critical points (located to 1e-3 of it; from "
+        f"{REFINE_TOL_RANGE[0]:g} to {REFINE_TOL_RANGE[1]:g}, default 1e-4)",
     )
     p.add_argument(
         "--json",
@@ -119,11 +156,11 @@ def add_parser(sub):
         help="also give the loaded 6x6 stiffness K_C (eq. 30) at every point (JSON: 'stiffness'); "
         "in text, at the points just before and after each critical point",
     )
-    p.set_defaults(func=run)
 
 
 def load_model(name: str, subdivide: int = 1):
-    """Resolve ``name`` (path or bundled model) and subdivide its beam links if asked."""
+    """Resolve ``name`` (path or bundled model; every model kind) and subdivide its beam links if
+    asked (open chains only)."""
     from vjm_pin.exceptions import InputError
     from vjm_pin.model.registry import bundled_models, resolve_model
 
@@ -132,6 +169,9 @@ def load_model(name: str, subdivide: int = 1):
     if subdivide == 1:
         return resolve_model(name)
     from vjm_pin.model.subdivide import subdivide_model
+
+    if resolve_model(name).closures:  # also the error of an unknown name
+        raise InputError("--subdivide is not available for models with loop closures")
 
     src = bundled_models().get(name, name)
     if not Path(src).is_file():
@@ -167,32 +207,56 @@ def critical_dict(c) -> dict:
     }
 
 
-def stiffness_matrix(vm, p):
-    """Loaded K_C (6, 6) at a traced point (eq. 30), or None where it is singular/infinite."""
+def stiffness_matrix(vm, p, mechanism=None):
+    """Loaded K_C (6, 6) at a traced point, or None where it is singular/infinite: eq. (30) for an
+    :class:`~vjm_pin.solver.EquilibriumResult`, eq. (28) bordered with the closure rows for a
+    :class:`~vjm_pin.solver.MechanismResult` (``mechanism``: the
+    :class:`~vjm_pin.solver.MechanismSolver` with the curve's dead loads)."""
     from vjm_pin.exceptions import SingularStiffness
-    from vjm_pin.solver import loaded_stiffness
+    from vjm_pin.solver import MechanismResult, loaded_stiffness
 
     try:
+        if isinstance(p.equilibrium, MechanismResult):
+            return mechanism.stiffness(p.equilibrium).stiffness
         return loaded_stiffness(vm, p.equilibrium).stiffness
     except SingularStiffness:
         return None
 
 
-def curve_dict(vm, curve, matrices: bool = False) -> dict:
+def curve_dict(vm, curve, matrices: bool = False, *, free=False, loads=(), gravity=None, load_list=None) -> dict:
+    """The ``curve --json`` body (:func:`curve_json` completes it): ``loads`` the dead loads
+    (:class:`~vjm_pin.kinematics.dead_loads.Load`) the curve was traced under, ``gravity`` (3,) or
+    None, ``load_list`` their JSON form."""
+    mech = None
+    if matrices and any(_is_mechanism_point(p) for p in curve.points):
+        from vjm_pin.solver import MechanismSolver
+
+        mech = MechanismSolver(vm, loads, gravity)
+
     def pd(p):
         d = point_dict(p)
         if matrices:
-            d["stiffness"] = stiffness_matrix(vm, p)
+            d["stiffness"] = stiffness_matrix(vm, p, mech)
         return d
 
     return {
         "model": vm.name,
-        "parallel": False,
+        "parallel": bool(vm.closures),
         "direction": curve.direction,
+        "free": bool(free),
+        "loads": load_list if load_list is not None else [],
+        "gravity": gravity is not None,
         "points": [pd(p) for p in curve.points],
         "critical": [critical_dict(c) for c in curve.critical],
         "branches": [[pd(p) for p in br] for br in curve.branches],
+        "stopped": getattr(curve, "stopped", None) or None,  # null: traced to --max-deflection
     }
+
+
+def _is_mechanism_point(p) -> bool:
+    from vjm_pin.solver import MechanismResult
+
+    return isinstance(p.equilibrium, MechanismResult)
 
 
 def trace_and_plot(trace, args, name: str):
@@ -221,23 +285,21 @@ def trace_and_plot(trace, args, name: str):
 def run(args) -> int:
     import numpy as np
 
+    from vjm_pin.analysis.curve import trace_curve
+    from vjm_pin.cli.analyze import dead_loads_from_args, loads_list
+    from vjm_pin.cli.common import check_output_option, direction_vector, dump_json
     from vjm_pin.exceptions import InputError
     from vjm_pin.outputs import PLOT_EXTENSIONS
-    from vjm_pin.analysis.curve import trace_curve
-    from vjm_pin.cli.common import check_output_option, direction_vector, dump_json
-    from vjm_pin.cli.parallel_cmds import is_parallel_model, run_curve
 
     check_output_option(args, "--plot", PLOT_EXTENSIONS)  # before any work
-    if is_parallel_model(
-        args.model
-    ):  # parallel robots (<vjm:leg> tags): vjm_pin/cli/parallel_cmds.py
-        return run_curve(args)
-    if getattr(args, "held", False):
-        raise InputError("--held applies to parallel models (<vjm:leg> tags) only")
     vm = load_model(args.model, args.subdivide)
     d = direction_vector(args.direction, "--direction")
     if not np.isfinite(args.max_deflection):
         raise InputError(f"--max-deflection must be finite, got {args.max_deflection}")
+    loads, gravity = dead_loads_from_args(args, vm)
+    # the one tracer for every model kind; the mechanism options only when asked (open chains
+    # without them keep the serial tracer's defaults)
+    extra = {k: v for k, v in (("loads", loads), ("gravity", gravity), ("free", args.free)) if v}
     curve = trace_and_plot(
         lambda cb: trace_curve(
             vm,
@@ -247,18 +309,35 @@ def run(args) -> int:
             refine_tol=args.refine_tol,
             all_branches=args.all_branches,
             progress=cb,
+            **extra,
         ),
         args,
         vm.name,
     )
+    body = curve_dict(
+        vm, curve, args.matrices, free=args.free, loads=loads, gravity=gravity, load_list=loads_list(args, loads)
+    )
     if args.json:
-        print(dump_json(curve_json(curve_dict(vm, curve, args.matrices))))
+        print(dump_json(curve_json(body)))
         return 0
+    _print_curve(args, vm, curve, loads, gravity)
+    return 0
+
+
+def _print_curve(args, vm, curve, loads, gravity) -> None:
+    """The text output of ``curve``."""
+    import numpy as np
+
     rot = bool(np.any(curve.direction[3:]))
     du, fu = ("rad", "N·m") if rot else ("m", "N")
     print(
         f"model {vm.name}: direction {np.round(curve.direction, 4).tolist()}, {len(curve.points)} points"
+        + (" (end free across the direction)" if args.free else "")
     )
+    for ld in loads:
+        print(f"dead load at '{ld.frame}' [N, N·m, world axes]: {np.array2string(ld.wrench, precision=4)}")
+    if gravity is not None:
+        print("dead loads: link weights (gravity)")
     print(
         f"{'deflection [' + du + ']':>18} {'force [' + fu + ']':>16} {'stiffness [' + fu + '/' + du + ']':>20}"
         f"  stable  {'force-control margin':>20}"
@@ -282,11 +361,17 @@ def run(args) -> int:
     if args.matrices:
         from vjm_pin.cli.common import fmt_matrix
 
+        mech = None
+        if any(_is_mechanism_point(p) for p in curve.points):
+            from vjm_pin.solver import MechanismSolver
+
+            mech = MechanismSolver(vm, loads, gravity)
+
         for c in curve.critical:
             for label, idx in (("before", c.index - 1), ("after", c.index)):
                 if 0 <= idx < len(curve.points):
                     p = curve.points[idx]
-                    k = stiffness_matrix(vm, p)
+                    k = stiffness_matrix(vm, p, mech)
                     print(
                         f"loaded stiffness K_C {label} the critical point (deflection {p.deflection:.6g} {du}):"
                     )
@@ -300,6 +385,7 @@ def run(args) -> int:
             f"branch {i + 1}: {len(br)} points, {'unstable' if not any(p.stable for p in br) else 'mixed'}, "
             f"force {br[0].force:.6g} .. {br[-1].force:.6g} {fu}"
         )
+    if getattr(curve, "stopped", None):
+        print(f"WARNING: the curve stopped before --max-deflection: {curve.stopped}")
     if args.plot:
         print(f"plot written to {args.plot}")
-    return 0

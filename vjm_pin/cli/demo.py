@@ -39,10 +39,10 @@ def add_parser(sub):
 
 
 def run(args) -> int:
-    from vjm_pin.outputs import HTML_EXTENSIONS, PLOT_EXTENSIONS, check_output, check_output_dir
-    from vjm_pin.model.registry import resolve_model
     from vjm_pin.cli.common import Progress, summary
     from vjm_pin.cli.view import curve_page, trace
+    from vjm_pin.model.registry import resolve_model
+    from vjm_pin.outputs import HTML_EXTENSIONS, PLOT_EXTENSIONS, check_output, check_output_dir
 
     out = check_output_dir(args.out, what="--out")  # before any work
     png, html = out / "curve.png", out / "curve.html"

@@ -24,8 +24,8 @@ def add_parser(sub):
 
 
 def run(args) -> int:
-    from vjm_pin.model.registry import bundled_models, models_dir
     from vjm_pin.cli.common import dump_json, envelope
+    from vjm_pin.model.registry import bundled_models, models_dir
 
     if args.robots:
         from vjm_pin.model.robots import robot_names, robot_source

@@ -108,13 +108,15 @@ VJM_TAGS: dict[str, VjmTag] = {
     "platform": VjmTag(
         "robot",
         ("name", "components"),
-        "Parallel robots (docs/parallel.md), optional: platform name and constrained components.",
+        "Parallel robots (docs/parallel.md), optional: platform name (the task frame, on the first leg) and "
+        "constrained components (the task; the legs are joined to the platform in these components).",
     ),
     "leg": VjmTag(
         "robot",
         ("name", "frame", "offset"),
         "Parallel robots (docs/parallel.md): one leg, the link where it meets the platform and the "
-        "platform point in that link's frame (m).",
+        "platform point in that link's frame (m). Every leg but the first is held on the platform by a "
+        "closure named after the leg.",
     ),
     "closure": VjmTag(
         "robot",
@@ -345,7 +347,7 @@ def _read_closures(root: ET.Element, model, label: str, reference: np.ndarray) -
         ClosureViolated: a listed component is not zero to :data:`ASSEMBLY_TOLERANCE` at
             the reference configuration.
     """
-    import pinocchio as pin
+    from vjm_pin.model.placements import frame_placements
 
     frame_names = [f.name for f in model.frames]
     closures: list[Closure] = []
@@ -368,10 +370,9 @@ def _read_closures(root: ET.Element, model, label: str, reference: np.ndarray) -
         closures.append(Closure(name, frames[0], frames[1], tuple(comps.split())))
     if not closures:
         return ()
-    data = model.createData()
-    pin.framesForwardKinematics(model, data, reference)
+    omf = frame_placements(model, reference)  # no pin.Data: model/placements.py
     for c in closures:
-        ma, mb = data.oMf[model.getFrameId(c.frame_a)], data.oMf[model.getFrameId(c.frame_b)]
+        ma, mb = omf[model.getFrameId(c.frame_a)], omf[model.getFrameId(c.frame_b)]
         s = relative_placement(ma.translation, ma.rotation, mb.translation, mb.rotation)
         for i in c.indices:
             if not abs(s[i]) <= ASSEMBLY_TOLERANCE:
@@ -385,6 +386,109 @@ def _read_closures(root: ET.Element, model, label: str, reference: np.ndarray) -
                     float(s[i]),
                 )
     return tuple(closures)
+
+
+#: Suffix of the Pinocchio frame added at each leg's platform point (``<leg>__platform``).
+LEG_FRAME_SUFFIX = "__platform"
+
+
+@dataclass(frozen=True)
+class Leg:
+    """One leg of a model written with the ``<vjm:leg>``/``<vjm:platform>`` shorthand.
+
+    Attributes:
+        name: Leg name.
+        frame: The link where the leg meets the platform.
+        offset: (3,) the platform point in ``frame``'s axes (m).
+        platform_frame: Name of the Pinocchio frame the loader adds at the platform point, on
+            ``frame``'s joint, world-aligned at the file's reference configuration
+            (``"<leg>__platform"``).
+        joints: Names of the non-fixed joints on the path from the root to ``frame``, root first.
+    """
+
+    name: str
+    frame: str
+    offset: np.ndarray
+    platform_frame: str
+    joints: tuple[str, ...]
+
+
+def _read_platform(root: ET.Element, label: str) -> tuple[str, tuple[int, ...]]:
+    """Name and task components of ``<vjm:platform>`` (defaults ``platform``, all six)."""
+    plats = root.findall(f"{_Q}platform")
+    if len(plats) > 1:
+        raise ModelError(f"{label}: more than one <vjm:platform> element")
+    plat = plats[0] if plats else None
+    name = (plat.get("name") if plat is not None else None) or "platform"
+    comps = ((plat.get("components") if plat is not None else None) or " ".join(COMPONENTS)).split()
+    if any(c not in COMPONENTS for c in comps) or not comps or len(set(comps)) != len(comps):
+        raise ModelError(f"{label}: platform components {comps} must be distinct names from {list(COMPONENTS)}")
+    return name, tuple(sorted(COMPONENTS.index(c) for c in comps))
+
+
+def _read_legs(root: ET.Element, model, label: str, reference: np.ndarray):
+    """The ``<vjm:leg>``/``<vjm:platform>`` shorthand as frames and closures (docs/parallel.md).
+
+    Adds to ``model`` one frame per leg at its platform point (``frame`` + ``offset``,
+    world-aligned at ``reference``) and the task frame named after the platform (on the first
+    leg, same placement); every other leg's frame is held on the task frame by a closure named
+    after the leg in the platform components (all six: a rigid platform; ``x y z``: the legs
+    meet at a point).
+
+    Returns:
+        (legs, task frame name, task components, closures).
+
+    Raises:
+        ModelError: a leg without ``name``/``frame``, a repeated leg name, a bad offset, a frame
+            name already used, or legs whose platform points do not coincide at ``reference``.
+        FrameNotFound: a leg's ``frame`` is not a link.
+    """
+    import pinocchio as pin
+
+    pname, task = _read_platform(root, label)
+    links = sorted(f.name for f in model.frames if f.type == pin.FrameType.BODY)
+    from vjm_pin.model.placements import frame_placements
+
+    omf = frame_placements(model, reference)  # no pin.Data: model/placements.py
+    legs: list[Leg] = []
+    points = []
+    for el in root.findall(f"{_Q}leg"):
+        name, frame = el.get("name"), el.get("frame")
+        if not name or not frame:
+            raise ModelError(f"{label}: <vjm:leg> needs 'name' and 'frame' attributes")
+        if any(lg.name == name for lg in legs):
+            raise ModelError(f"{label}: two legs named '{name}'")
+        if frame not in links:
+            raise FrameNotFound(frame, links, f"vjm:leg '{name}'")
+        off = _parse_numbers(el.get("offset") or "0 0 0", f"leg '{name}' offset")
+        if off.size != 3:
+            raise ModelError(f"leg '{name}': offset needs 3 numbers (m), got {off.size}")
+        fid = model.getFrameId(frame)
+        link = model.frames[fid]
+        world = omf[fid]
+        # platform point on the link, its axes turned back to world at the reference
+        placement = link.placement * pin.SE3(world.rotation.T, off)
+        joints, j = [], link.parentJoint
+        while j > 0:
+            joints.append(model.names[j])
+            j = model.parents[j]
+        fnames = [f"{name}{LEG_FRAME_SUFFIX}"] + ([pname] if not legs else [])
+        for fname in fnames:
+            if model.existFrame(fname):
+                raise ModelError(f"{label}: leg '{name}': the model already has a frame named '{fname}'")
+            model.addFrame(pin.Frame(fname, link.parentJoint, fid, placement, pin.FrameType.OP_FRAME))
+        legs.append(Leg(name, frame, off, fnames[0], tuple(joints[::-1])))
+        points.append(world.act(off))
+    scale = max(max(np.linalg.norm(p) for p in points), 1.0)
+    for lg, p in zip(legs, points):
+        if np.linalg.norm(p - points[0]) > 1e-9 * scale:
+            raise ModelError(
+                f"{label}: leg '{lg.name}' puts the platform point at {np.round(p, 9).tolist()} but leg "
+                f"'{legs[0].name}' at {np.round(points[0], 9).tolist()} (reference configuration): check its offset"
+            )
+    comps = tuple(COMPONENTS[i] for i in task)
+    closures = tuple(Closure(lg.name, lg.platform_frame, pname, comps) for lg in legs[1:])
+    return tuple(legs), pname, task, closures
 
 
 @dataclass(frozen=True)
@@ -410,6 +514,11 @@ class VjmModel:
         closures: The loop closures (``<vjm:closure>``), file order; empty for a tree. The
             file's reference configuration satisfies them (to 1e-9); one changed by
             :meth:`with_positions` need not (the solver re-assembles the mechanism).
+            A model written with ``<vjm:leg>`` holds every leg but the first on the platform
+            (closures named after the legs, :attr:`legs`).
+        legs: The legs of a model written with the ``<vjm:leg>``/``<vjm:platform>`` shorthand
+            (:class:`Leg`, file order; the task frame is the platform, on the first leg);
+            empty otherwise. :func:`vjm_pin.model.legs.split_legs` gives each as a serial model.
     """
 
     model: object
@@ -426,6 +535,7 @@ class VjmModel:
     theta0: np.ndarray
     urdf: str = field(repr=False, default="")
     closures: tuple[Closure, ...] = ()
+    legs: tuple[Leg, ...] = ()
 
     # ------------------------------------------------------------------ names
     @property
@@ -564,6 +674,11 @@ def load_vjm(source: str | Path) -> VjmModel:
             outside (or in two) spring groups; an unsupported joint type.
         JointNotFound, FrameNotFound: a tag names a joint/frame the URDF does not have.
         StiffnessMatrixError: a matrix of the wrong size, not symmetric or not SPD.
+        ModelError: a ``<vjm:leg>``/``<vjm:platform>`` shorthand that does not assemble (legs
+            whose platform points differ, a ``<vjm:task>`` next to legs; see :func:`_read_legs`).
+
+    A model written with ``<vjm:leg>`` loads as a mechanism: the platform is the task frame on
+    the first leg and every other leg is held on it by a closure (docs/parallel.md).
     """
     root, text, label = _read_root(source)
     model = build_pin_model(text, label)
@@ -578,24 +693,73 @@ def load_vjm(source: str | Path) -> VjmModel:
                 "'floating'/'planar' into chains of 1-DOF joints)"
             )
 
-    # --- task
-    tasks = root.findall(f"{_Q}task")
-    if len(tasks) != 1:
-        raise ModelError(f"{label}: expected exactly one <vjm:task frame=... /> element, found {len(tasks)}")
-    frame = tasks[0].get("frame")
-    if not frame:
-        raise ModelError(f"{label}: <vjm:task> has no 'frame' attribute")
-    if not model.existFrame(frame):
-        raise FrameNotFound(frame, frame_names, "vjm:task")
-    comps = (tasks[0].get("components") or " ".join(COMPONENTS)).split()
-    for c in comps:
-        if c not in COMPONENTS:
-            raise ModelError(f"{label}: task component '{c}' is not one of {list(COMPONENTS)}")
-    if len(set(comps)) != len(comps) or not comps:
-        raise ModelError(f"{label}: task components {comps} must be distinct and non-empty")
-    task = tuple(sorted(COMPONENTS.index(c) for c in comps))
+    frame, task, has_legs = _read_task(root, model, label, frame_names)
+    roles, positions, act_stiff = _read_roles(root, label, joint_names)
+    springs = _read_springs(root, label, joint_names, roles, positions, act_stiff)
+    full_roles, reference, theta_idx, theta0, K, q_idx = _assemble_springs(
+        label, model, joint_names, roles, positions, act_stiff, springs
+    )
+    legs, leg_closures = (), ()
+    if has_legs:
+        legs, frame, task, leg_closures = _read_legs(root, model, label, reference)
+    closures = _read_closures(root, model, label, reference)
+    clash = sorted({c.name for c in closures} & {c.name for c in leg_closures})
+    if clash:
+        raise ModelError(f"{label}: closure name(s) {clash} are also leg names (the legs' closures)")
+    closures = leg_closures + closures
+    return VjmModel(
+        model=model,
+        name=root.get("name", "robot"),
+        frame=frame,
+        frame_id=int(model.getFrameId(frame)),
+        task=task,
+        roles=full_roles,
+        springs=tuple(springs),
+        reference=reference,
+        theta_idx=np.array(theta_idx, dtype=int),
+        q_idx=np.array(q_idx, dtype=int),
+        K_theta=np.asarray(K, dtype=float),
+        theta0=np.array(theta0, dtype=float),
+        urdf=text,
+        closures=closures,
+        legs=legs,
+    )
 
-    # --- roles
+
+def _read_task(root, model, label: str, frame_names):
+    """``(frame, task, has_legs)`` of ``<vjm:task>`` (or, with legs, empty: the platform
+    gives them once the reference is known, :func:`_read_legs`)."""
+    tasks = root.findall(f"{_Q}task")
+    has_legs = bool(root.findall(f"{_Q}leg"))
+    if has_legs and tasks:
+        raise ModelError(
+            f"{label}: a model with <vjm:leg> elements takes its task from <vjm:platform>; remove <vjm:task>"
+        )
+    if not has_legs and root.findall(f"{_Q}platform"):
+        raise ModelError(f"{label}: <vjm:platform> without <vjm:leg name=... frame=... offset=.../> elements")
+    if has_legs:
+        frame, task = "", ()  # from the platform (_read_legs, once the reference is known)
+    elif len(tasks) != 1:
+        raise ModelError(f"{label}: expected exactly one <vjm:task frame=... /> element, found {len(tasks)}")
+    else:
+        frame = tasks[0].get("frame")
+        if not frame:
+            raise ModelError(f"{label}: <vjm:task> has no 'frame' attribute")
+        if not model.existFrame(frame):
+            raise FrameNotFound(frame, frame_names, "vjm:task")
+        comps = (tasks[0].get("components") or " ".join(COMPONENTS)).split()
+        for c in comps:
+            if c not in COMPONENTS:
+                raise ModelError(f"{label}: task component '{c}' is not one of {list(COMPONENTS)}")
+        if len(set(comps)) != len(comps) or not comps:
+            raise ModelError(f"{label}: task components {comps} must be distinct and non-empty")
+        task = tuple(sorted(COMPONENTS.index(c) for c in comps))
+
+    return frame, task, has_legs
+
+
+def _read_roles(root, label: str, joint_names):
+    """``(roles, positions, actuator stiffnesses)`` of the ``<vjm:joint>`` tags."""
     roles: dict[str, str] = {}
     positions: dict[str, float] = {}
     act_stiff: dict[str, float] = {}
@@ -623,7 +787,11 @@ def load_vjm(source: str | Path) -> VjmModel:
     if missing:
         raise RoleError(f"joint(s) {missing} have no role: add <vjm:joint name=... role=\"passive|spring|actuated\"/>")
 
-    # --- springs
+    return roles, positions, act_stiff
+
+
+def _read_springs(root, label: str, joint_names, roles, positions, act_stiff) -> list:
+    """The :class:`SpringGroup` s of ``<vjm:spring>`` tags, then one per stiff actuator."""
     springs: list[SpringGroup] = []
     owner: dict[str, str] = {}
     for el in root.findall(f"{_Q}spring"):
@@ -670,6 +838,11 @@ def load_vjm(source: str | Path) -> VjmModel:
     for name, k in act_stiff.items():
         springs.append(SpringGroup(name, (name,), np.array([[k]]), np.array([positions.get(name, 0.0)])))
 
+    return springs
+
+
+def _assemble_springs(label: str, model, joint_names, roles, positions, act_stiff, springs):
+    """``(roles with 'locked' actuators, reference, θ indices, θ₀, K_θ, q indices)``."""
     full_roles = {n: ("locked" if r == "actuated" and n not in act_stiff else r) for n, r in roles.items()}
     reference = np.zeros(model.nq)
     for n, v in positions.items():
@@ -681,29 +854,17 @@ def load_vjm(source: str | Path) -> VjmModel:
             reference[joint_names.index(jn)] = r
         blocks.append(g.stiffness)
         theta0.extend(g.rest)
-    from scipy.linalg import block_diag
-
-    K = block_diag(*blocks) if blocks else np.zeros((0, 0))
+    # block-diagonal K_θ (numpy only: importing scipy.linalg would dominate a one-shot CLI run)
+    K = np.zeros((len(theta0), len(theta0)))
+    at = 0
+    for blk in blocks:
+        k = len(blk)
+        K[at : at + k, at : at + k] = blk
+        at += k
     q_idx = [i for i, n in enumerate(joint_names) if full_roles[n] == "passive"]
     for i, r in enumerate(reference):
         if not math.isfinite(r):
             raise InputError(f"joint '{joint_names[i]}': position is not finite")
     if not springs:
         raise RoleError(f"{label}: the model has no spring (no <vjm:spring> and no actuated joint with a stiffness)")
-    closures = _read_closures(root, model, label, reference)
-    return VjmModel(
-        model=model,
-        name=root.get("name", "robot"),
-        frame=frame,
-        frame_id=int(model.getFrameId(frame)),
-        task=task,
-        roles=full_roles,
-        springs=tuple(springs),
-        reference=reference,
-        theta_idx=np.array(theta_idx, dtype=int),
-        q_idx=np.array(q_idx, dtype=int),
-        K_theta=np.asarray(K, dtype=float),
-        theta0=np.array(theta0, dtype=float),
-        urdf=text,
-        closures=closures,
-    )
+    return full_roles, reference, theta_idx, theta0, K, q_idx

@@ -55,10 +55,11 @@ import numpy as np
 from vjm_pin.exceptions import FrameNotFound, JointNotFound, SpecError, UrdfParseError
 from vjm_pin.model.beam import Beam
 from vjm_pin.model.format import COMPONENTS, NS, _read_root, build_pin_model, check_stiffness_matrix
-from vjm_pin.model.spec import SPEC_KEYS, LinkSpec, read_spec  # noqa: F401 - SPEC_KEYS re-exported
+from vjm_pin.model.spec import LINK_KEYS as _LINK_KEYS
+from vjm_pin.model.spec import SPEC_KEYS, read_spec  # noqa: F401 - SPEC_KEYS re-exported
 
 _Q = f"{{{NS}}}"
-LINK_KEYS = set(LinkSpec.model_fields)
+LINK_KEYS = set(_LINK_KEYS)  # the fields of spec.LinkSpec (built lazily: no pydantic at import)
 SPRING_SUFFIX = ("tx", "ty", "tz", "rx", "ry", "rz")
 
 

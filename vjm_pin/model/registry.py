@@ -43,7 +43,16 @@ def is_vjm_urdf(path: Path) -> bool:
         raise ModelError(f"cannot read model file {path}: {e.strerror or e}") from None
 
 
-def resolve(name_or_path: str, *, frame=None, q=None, pose_name=None, springs=None, allow_closures=False):
+def model_path(name: str) -> Path | None:
+    """The URDF file of ``name`` (a file path, or a bundled model name), or None (a robot
+    name, an unknown name)."""
+    p = Path(name)
+    if p.is_file():
+        return p
+    return bundled_models().get(str(name))
+
+
+def resolve(name_or_path: str, *, frame=None, q=None, pose_name=None, springs=None):
     """Load a model from a VJM URDF, a bundled model name, a plain (rigid) URDF or the name of
     an ``example-robot-data`` robot.
 
@@ -52,8 +61,9 @@ def resolve(name_or_path: str, *, frame=None, q=None, pose_name=None, springs=No
     pose ``pose_name`` and the joint positions ``q`` ({name: rad or m}). For a VJM URDF or a
     bundled model only ``q`` applies (:meth:`VjmModel.with_positions`).
 
-    Models with loop closures are refused unless ``allow_closures`` (callers that solve them
-    with :class:`~vjm_pin.solver.MechanismSolver`; the serial solver would ignore the closures).
+    Every model kind loads: open chains, and mechanisms with loop closures (``vm.closures``,
+    solved by :class:`~vjm_pin.solver.MechanismSolver`; the serial
+    :class:`~vjm_pin.solver.EquilibriumSolver` refuses them).
 
     Returns:
         (vm, robot): the :class:`VjmModel`, and the :class:`~vjm_pin.model.robots.RobotModel` it was
@@ -93,18 +103,13 @@ def resolve(name_or_path: str, *, frame=None, q=None, pose_name=None, springs=No
             return rm.vm, rm
         else:
             raise UnknownRobot(name_or_path, list(models) + robot_names())
-    given = [k for k, v in (("--frame", frame), ("--pose-name", pose_name), ("--springs", springs)) if v is not None]
+    given = [k for k, v in (("frame", frame), ("pose_name", pose_name), ("springs", springs)) if v is not None]
     if given:
         raise ModelError(
-            f"{', '.join(given)} apply to rigid URDFs and robots; '{name_or_path}' is a VJM model "
+            f"options {', '.join(given)} apply to rigid URDFs and robots; '{name_or_path}' is a VJM model "
             "whose frame and springs are in its tags"
         )
     vm = load_vjm(vjm_path)
-    if vm.closures and not allow_closures:  # callers that solve with the serial solver would ignore them
-        raise ModelError(
-            f"model '{name_or_path}' has loop closures ({', '.join(c.name for c in vm.closures)}); the solver "
-            "of this version handles open chains only, it would ignore them"
-        )
     if q:
         vm = vm.with_positions(q)
     return vm, None

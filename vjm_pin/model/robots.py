@@ -33,13 +33,15 @@ from pathlib import Path
 
 import numpy as np
 
-from vjm_pin.exceptions import (
+from vjm_pin.exceptions import (  # UnknownRobot, AmbiguousFrame: raised here, importable from here
+    AmbiguousFrame,
     ArgumentError,
     FrameNotFound,
     InputError,
     JointNotFound,
     ModelError,
     SpecError,
+    UnknownRobot,
     UrdfParseError,
 )
 from vjm_pin.model.format import VjmModel, _read_root, load_vjm
@@ -48,45 +50,6 @@ from vjm_pin.model.format import VjmModel, _read_root, load_vjm
 DEFAULT_REVOLUTE_STIFFNESS = 1.0e5
 #: Default actuator stiffness of prismatic joints (N/m).
 DEFAULT_PRISMATIC_STIFFNESS = 1.0e7
-
-
-class UnknownRobot(ModelError):
-    """A robot name that is neither a file, a bundled model nor an ``example-robot-data`` robot.
-
-    Attributes:
-        name: The unknown name.
-        candidates: Known robot names.
-    """
-
-    def __init__(self, name: str, candidates):
-        import difflib
-
-        self.name = name
-        self.candidates = list(candidates)
-        self.close = difflib.get_close_matches(name, self.candidates, n=3)
-        hint = f"; did you mean {', '.join(self.close)}?" if self.close else ""
-        # one line: the full list (dozens of names) is in `candidates` and in `vjm-pin models`
-        super().__init__(
-            f"unknown model or robot '{name}': not a file, not a bundled model and not an "
-            f"example-robot-data robot ({len(self.candidates)} known names){hint}"
-        )
-
-
-class AmbiguousFrame(FrameNotFound):
-    """No default end frame: the robot's tree branches. Attributes: ``link`` (where it
-    branches), ``branches`` (the child joints), ``candidates`` (leaf links with movable
-    joints on their path)."""
-
-    def __init__(self, link: str, branches, candidates):
-        self.name = "<default>"
-        self.link = link
-        self.branches = list(branches)
-        self.candidates = list(candidates)
-        ModelError.__init__(
-            self,
-            f"the robot branches at link '{link}' into joints {self.branches}: choose the end frame with "
-            f"--frame; candidates: {', '.join(self.candidates)}",
-        )
 
 
 @dataclass(frozen=True)
@@ -344,16 +307,16 @@ def parse_q(items) -> dict[str, float]:
     out = {}
     for it in items or []:
         if not isinstance(it, str) or "=" not in it:
-            raise InputError(f"--q expects NAME=VALUE, got '{it}'")
+            raise InputError(f"a joint position is NAME=VALUE, got '{it}'")
         name, val = it.split("=", 1)
         if not name.strip():
-            raise InputError(f"--q expects NAME=VALUE, got '{it}' (no joint name)")
+            raise InputError(f"a joint position is NAME=VALUE, got '{it}' (no joint name)")
         try:
             v = float(val)
         except ValueError:
-            raise InputError(f"--q {name}: '{val}' is not a number") from None
+            raise InputError(f"joint position {name}: '{val}' is not a number") from None
         if not math.isfinite(v):
-            raise InputError(f"--q {name}: value must be finite, got {val}")
+            raise InputError(f"joint position {name}: value must be finite, got {val}")
         out[name.strip()] = v
     return out
 
@@ -476,6 +439,43 @@ def build_robot(
     from vjm_pin.model.generator import generate_vjm, load_spec
 
     _check_robot_options(source, frame, q, pose_name)
+    src = _resolve_source(source)
+    text = _strip_transmissions(src.urdf)
+    tree = urdf_tree(text)
+    pose, used = _initial_pose(src, text, tree, pose_name, q)
+    user_q = dict(q or {})
+    check_pose(tree, user_q)
+    pose.update(user_q)
+    spec_data = None
+    if springs is not None:
+        spec_data = _read_spec(springs)
+    if frame is None and spec_data and spec_data.get("frame"):
+        frame = str(spec_data["frame"])  # the spec's end frame when no frame is given
+    if frame is None:
+        frame = default_frame(text, src.srdf)
+    elif frame not in tree.links:
+        raise FrameNotFound(frame, tree.links, "the end frame must be a link of the URDF")
+    chain = [j for j in tree.path_joints(frame) if tree.joints[j][0] != "fixed"]
+    if not chain:
+        raise ModelError(
+            f"robot '{src.name}': no movable joint between the root and frame '{frame}': nothing to analyse"
+        )
+    if pose_name is None and not user_q:
+        nudged = _nudge_if_singular(text, tree, frame, chain, pose)
+        if nudged is not pose:
+            used = f"{used or 'zeros'}+{SINGULAR_NUDGE:g} rad (singular)"
+        pose = nudged
+    spec_user = None if spec_data is None else load_spec(dict(spec_data, frame=frame))
+    spec = default_spec(text, frame, pose, spec_user)
+    if "task" not in spec:
+        spec["task"] = default_task(text, frame, spec["positions"])
+    spec.setdefault("name", src.name)
+    vm = load_vjm(generate_vjm(text, spec))
+    return RobotModel(vm, src, spec, pose, used, text)
+
+
+def _resolve_source(source) -> RobotSource:
+    """The :class:`RobotSource` of ``source`` (a source, a catalogue name or a URDF path)."""
     if isinstance(source, (str, Path)) and not (
         isinstance(source, str) and source in robot_names()
     ):
@@ -484,13 +484,15 @@ def build_robot(
             if p.suffix == ".urdf":
                 raise ModelError(f"URDF file not found: {p}")
             raise UnknownRobot(str(source), robot_names())
-        src = RobotSource(p.stem, p, None, None, False)
-    elif isinstance(source, str):
-        src = robot_source(source)
-    else:
-        src = source
-    text = _strip_transmissions(src.urdf)
-    tree = urdf_tree(text)
+        return RobotSource(p.stem, p, None, None, False)
+    if isinstance(source, str):
+        return robot_source(source)
+    return source
+
+
+def _initial_pose(src, text, tree, pose_name, q) -> tuple[dict[str, float], str | None]:
+    """The pose before the user's ``q``: the named SRDF state ``pose_name``, else the loader's
+    reference state when no ``q`` is given, else empty (zeros); with the state's name (or None)."""
     states = srdf_states(src.srdf, text)
     pose: dict[str, float] = {}
     used = None
@@ -513,35 +515,7 @@ def build_robot(
                 },
             )
         )
-    user_q = dict(q or {})
-    check_pose(tree, user_q)
-    pose.update(user_q)
-    spec_data = None
-    if springs is not None:
-        spec_data = _read_spec(springs)
-    if frame is None and spec_data and spec_data.get("frame"):
-        frame = str(spec_data["frame"])  # the spec's end frame when --frame is not given
-    if frame is None:
-        frame = default_frame(text, src.srdf)
-    elif frame not in tree.links:
-        raise FrameNotFound(frame, tree.links, "--frame must be a link of the URDF")
-    chain = [j for j in tree.path_joints(frame) if tree.joints[j][0] != "fixed"]
-    if not chain:
-        raise ModelError(
-            f"robot '{src.name}': no movable joint between the root and frame '{frame}': nothing to analyse"
-        )
-    if pose_name is None and not user_q:
-        nudged = _nudge_if_singular(text, tree, frame, chain, pose)
-        if nudged is not pose:
-            used = f"{used or 'zeros'}+{SINGULAR_NUDGE:g} rad (singular)"
-        pose = nudged
-    spec_user = None if spec_data is None else load_spec(dict(spec_data, frame=frame))
-    spec = default_spec(text, frame, pose, spec_user)
-    if "task" not in spec:
-        spec["task"] = default_task(text, frame, spec["positions"])
-    spec.setdefault("name", src.name)
-    vm = load_vjm(generate_vjm(text, spec))
-    return RobotModel(vm, src, spec, pose, used, text)
+    return pose, used
 
 
 def _check_robot_options(source, frame, q, pose_name) -> None:
@@ -630,7 +604,7 @@ def _nudge_if_singular(text, tree: UrdfTree, frame: str, chain: list[str], pose:
     """The default pose (SRDF reference state or zeros) moved by :data:`SINGULAR_NUDGE` rad on
     every chain joint (kept in the limits) when the end frame is singular there (the joints
     cannot move it in min(6, n) independent directions, e.g. the stretched UR arm at zero).
-    Explicit poses (``--q``, ``--pose-name``) are never changed."""
+    Explicit poses (``q``, ``pose_name``) are never changed."""
     full = {j: 0.0 for j in tree.movable}
     full.update(pose)
     jac = _rigid_jacobian(text, frame, full)

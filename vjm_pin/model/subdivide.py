@@ -43,6 +43,57 @@ def _beam_entry(beam_el: ET.Element, spring: str) -> tuple[dict, list[str], int]
     return beam, dofs, done
 
 
+def _subdivide_spring(root, sp, k, joints, links, role_tags) -> None:
+    """Replace the lumped beam spring ``sp`` of ``root`` (in place) by a chain of ``k``
+    sub-springs of length ``L/k``, re-attaching the joints downstream of it."""
+    name = sp.get("name")
+    beam, dofs, done = _beam_entry(sp.find(f"{_Q}beam"), name)
+    if done != 1:
+        raise ModelError(
+            f"spring '{name}' was already subdivided ({done} sub-links); subdivide the original model"
+        )
+    rest = np.array([float(v) for v in (sp.findtext(f"{_Q}rest") or "").split()] or [0.0])
+    if np.any(rest != 0):
+        raise ModelError(
+            f"spring '{name}' has a preload (non-zero rest): subdivision would not preserve it"
+        )
+    jnames = sp.get("joints").split()
+    first = joints[jnames[0]]
+    parent = first.find("parent").get("link")
+    o = first.find("origin")
+    tip = np.array([float(v) for v in (o.get("xyz") if o is not None else "0 0 0").split()])
+    if np.linalg.norm(tip) < 1e-12:
+        raise ModelError(
+            f"spring '{name}': the beam tip coincides with the link origin; cannot subdivide"
+        )
+    last_frame = joints[jnames[-1]].find("child").get("link")
+    downstream = [
+        j for j in root.findall("joint") if j.find("parent").get("link") == last_frame
+    ]
+    # remove the lumped spring
+    for jn in jnames:
+        child = joints[jn].find("child").get("link")
+        root.remove(joints[jn])
+        root.remove(links[child])
+        root.remove(role_tags[jn])
+    pos = list(root).index(sp)
+    root.remove(sp)
+    sub_beam = dict(beam, length=beam["length"] / k)
+    kmat, dofs_out, rest_out, beam_dict = link_spring_matrix(
+        {"beam": sub_beam, "dofs": dofs}, name, tip / k
+    )
+    new_elems, tags, parent = spring_chain(
+        [f"{name}_s{s + 1}" for s in range(k)], sp.get("link"), parent, dofs_out, tip / k,
+        kmat, rest_out, beam_dict, k, joints, links, ModelError,
+    )
+    for j in downstream:
+        j.find("parent").set("link", parent)
+    for i, el in enumerate(tags):
+        root.insert(pos + i, el)
+    for el in new_elems:
+        root.append(el)
+
+
 def subdivide_vjm(source: str | Path, k: int) -> str:
     """VJM URDF text with every beam link split into ``k`` sub-links.
 
@@ -73,52 +124,7 @@ def subdivide_vjm(source: str | Path, k: int) -> str:
     links = {ln.get("name"): ln for ln in root.findall("link")}
     role_tags = {t.get("name"): t for t in root.findall(f"{_Q}joint")}
     for sp in springs:
-        name = sp.get("name")
-        beam, dofs, done = _beam_entry(sp.find(f"{_Q}beam"), name)
-        if done != 1:
-            raise ModelError(
-                f"spring '{name}' was already subdivided ({done} sub-links); subdivide the original model"
-            )
-        rest = np.array([float(v) for v in (sp.findtext(f"{_Q}rest") or "").split()] or [0.0])
-        if np.any(rest != 0):
-            raise ModelError(
-                f"spring '{name}' has a preload (non-zero rest): subdivision would not preserve it"
-            )
-        jnames = sp.get("joints").split()
-        first = joints[jnames[0]]
-        parent = first.find("parent").get("link")
-        o = first.find("origin")
-        tip = np.array([float(v) for v in (o.get("xyz") if o is not None else "0 0 0").split()])
-        if np.linalg.norm(tip) < 1e-12:
-            raise ModelError(
-                f"spring '{name}': the beam tip coincides with the link origin; cannot subdivide"
-            )
-        last_frame = joints[jnames[-1]].find("child").get("link")
-        downstream = [
-            j for j in root.findall("joint") if j.find("parent").get("link") == last_frame
-        ]
-        # remove the lumped spring
-        for jn in jnames:
-            child = joints[jn].find("child").get("link")
-            root.remove(joints[jn])
-            root.remove(links[child])
-            root.remove(role_tags[jn])
-        pos = list(root).index(sp)
-        root.remove(sp)
-        sub_beam = dict(beam, length=beam["length"] / k)
-        kmat, dofs_out, rest_out, beam_dict = link_spring_matrix(
-            {"beam": sub_beam, "dofs": dofs}, name, tip / k
-        )
-        new_elems, tags, parent = spring_chain(
-            [f"{name}_s{s + 1}" for s in range(k)], sp.get("link"), parent, dofs_out, tip / k,
-            kmat, rest_out, beam_dict, k, joints, links, ModelError,
-        )
-        for j in downstream:
-            j.find("parent").set("link", parent)
-        for i, el in enumerate(tags):
-            root.insert(pos + i, el)
-        for el in new_elems:
-            root.append(el)
+        _subdivide_spring(root, sp, k, joints, links, role_tags)
     # keep robot elements before the vjm tags (cosmetic; URDF order does not matter)
     robot = [el for el in root if not el.tag.startswith(_Q)]
     vjm = [el for el in root if el.tag.startswith(_Q)]

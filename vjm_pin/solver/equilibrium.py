@@ -75,13 +75,28 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pinocchio as pin
-from scipy.linalg import lapack as _lapack
-from scipy.linalg import solve_triangular as _solve_triangular
 
-from vjm_pin.exceptions import EquilibriumCheckError, InputError, NoEquilibrium, SingularStiffness
-from vjm_pin.kinematics.chain import Kinematics, contract_hessian, deflection, displace, flush_tiny, pose_error
+from vjm_pin.exceptions import (
+    EquilibriumCheckError,
+    InputError,
+    ModelError,
+    NoEquilibrium,
+    SingularStiffness,
+)
+from vjm_pin.kinematics.chain import (
+    Kinematics,
+    contract_hessian,
+    deflection,
+    displace,
+    flush_tiny,
+    pose_error,
+)
+from vjm_pin.kinematics.screw import psi_hessian_screw
 from vjm_pin.model.format import VjmModel
+from vjm_pin.model.task import task_vector
 from vjm_pin.solver.blocks import Blocks, evaluate_blocks, full_wrench, remember_blocks
+from vjm_pin.solver.lapack import lapack as _lapack
+from vjm_pin.solver.lapack import solve_triangular as _solve_triangular
 from vjm_pin.solver.stability import (
     RANK_TOL,
     SCIPY_LAPACK_MAX_N,
@@ -220,21 +235,7 @@ def _as_target(vm, kin, p0, r0, deflection_=None, target=None):
     if (deflection_ is None) == (target is None):
         raise InputError("give exactly one of a deflection or a target pose")
     if deflection_ is not None:
-        d = np.asarray(deflection_, dtype=float).ravel()
-        if d.size == 3:
-            d = np.concatenate([d, np.zeros(3)])
-        if d.size != 6:
-            raise InputError(f"deflection must have 3 or 6 components (m, rad), got {d.size}")
-        if not np.all(np.isfinite(d)):
-            raise InputError(f"deflection contains NaN or infinite values: {d.tolist()}")
-        free = [i for i in range(6) if i not in vm.task and d[i] != 0.0]
-        if free:
-            names = ["x", "y", "z", "rx", "ry", "rz"]
-            raise InputError(
-                f"deflection components {[names[i] for i in free]} are not constrained by this model "
-                f"(task is {vm.task_names}): they cannot be prescribed"
-            )
-        return displace(p0, r0, d)
+        return displace(p0, r0, task_vector(deflection_, vm.task, "deflection", "m, rad"))
     p, r = target
     p = np.asarray(p, float)
     r = np.asarray(r, float)
@@ -310,6 +311,11 @@ class EquilibriumSolver:
     ):
         _check_options(method=method, tol=tol, max_iter=max_iter, restarts=restarts,
                        perturbation=perturbation, seed=seed, follow_stable=follow_stable)
+        if getattr(vm, "closures", ()):  # this solver would ignore them: MechanismSolver solves them
+            raise ModelError(
+                f"model '{vm.name}' has loop closures ({', '.join(c.name for c in vm.closures)}): the serial "
+                "EquilibriumSolver would ignore them; solve it with MechanismSolver"
+            )
         self.vm = vm
         # ``_kin`` (private): a Kinematics of this model and frame to share (one pin.Data per
         # map worker instead of one per pose); same results, it only holds Pinocchio's workspace
@@ -347,6 +353,7 @@ class EquilibriumSolver:
         self._kz = np.zeros((len(self.free),) * 2)
         self._kz[: self.nt, : self.nt] = vm.K_theta
         self._hidx = (self.free[:, None] * nv + self.free[None, :]).ravel()
+        self._smask = self.kin.support_mask(self.free) if hasattr(self.kin, "support_mask") else None
         self._all_task = self.task == [0, 1, 2, 3, 4, 5]
         self._ip = np.array(self._rows_p, int)
         self._ir = np.array(self._rows_r, int)
@@ -400,6 +407,17 @@ class EquilibriumSolver:
         )
         return e, jz, grad, r, res, ok
 
+    def _psi_hessian(self, x, state, w6):
+        """The (θ, q) block of the Hessian of Ψ (eq. 16) at ``x`` (kinematic ``state``) for the 6-D
+        wrench ``w6``: screw form from J when the model allows it, else Pinocchio's tensor
+        (evaluated here if ``state`` lacks it: restoration evaluates J only)."""
+        kin = self.kin
+        if getattr(kin, "uses_screw", False):
+            return kin.psi_hessian(state, w6, self.free)
+        if state.hessian is None:
+            state = kin.evaluate(x)
+        return state.psi_hessian(w6)[np.ix_(self.free, self.free)]
+
     def _kkt_norm(self, e, r):
         return float(np.linalg.norm(e / self._err_scale) + np.linalg.norm(r) / max(self.kscale, 1e-300))
 
@@ -409,6 +427,13 @@ class EquilibriumSolver:
         if self.method == "fixed-point":
             return self._fixed_point(x, f, p_t, r_t, max_iter)
         return self._newton(x, f, p_t, r_t, max_iter)
+
+    def _moved(self, x, dx) -> np.ndarray:
+        """A copy of ``x`` with ``dx`` added to its free coordinates (tiny values flushed)."""
+        x = x.copy()
+        x[self.free] += dx
+        flush_tiny(x)
+        return x
 
     def _fast_newton(self, x, p_t, r_t):
         """Plain local Newton on eq. (5) from ``x``; None when it must give way to the
@@ -427,26 +452,19 @@ class EquilibriumSolver:
 
         Returns (x, f, iterations, state) with the verdict cached for :meth:`_result`.
         """
-        vm, kin, kz, task, free = self.vm, self.kin, self._kz, self.task, self.free
-        ti, th0, kt, nt = vm.theta_idx, vm.theta0, vm.K_theta, self.nt
-        m, n = len(task), len(free)
+        m, n = len(self.task), len(self.free)
         if m == 0 or m >= n:
             return None
         tol = self.tol
         tol_p = tol * self.length_scale
         kscale = max(self.kscale, 1e-300)
         stat_floor = 1e-6 * self.kscale
-        shift = SHIFT_TOL * self.kscale
-        diag = np.arange(n - m) * (n - m + 1)
-        ip, ir, escale = self._ip, self._ir, self._err_scale
-        rot = ir.size > 0  # log3 only when orientation rows are constrained
-        rows = None if self._all_task else self._task_rows
+        escale = self._err_scale
         pt = np.asarray(p_t, float)
         rt = np.asarray(r_t, float)
         kkt_prev = np.inf
         x = flush_tiny(np.array(x, dtype=float))
         f6 = np.zeros(6)
-        tau = np.zeros(n)
         qfull = np.zeros((n, n), order="F")
         # LAPACK directly for small models: numpy.linalg's wrappers cost more than these small
         # factorisations; numpy.linalg for large ones (see SCIPY_LAPACK_MAX_N)
@@ -459,141 +477,193 @@ class EquilibriumSolver:
                 # a warm start from the equilibrium this solver just found: its J, QR,
                 # multiplier and Hessian depend on x only (the target does not enter them)
                 st, jac, qf, rr, f, r, tau, hz = fact[2:]
-                y, z = qf[:, :m], qf[:, m:]
                 f6[self._task_rows] = f
             else:
-                st = kin.evaluate(x)
-                if st.hessian is None:
+                got = self._fast_factor(x, f6, qfull, big)
+                if got is None:
                     return None
-                jac = st.jacobian if rows is None else st.jacobian[rows]
-                jac = jac.take(free, axis=1)
-                tau = np.zeros(n)
-                tau[:nt] = kt @ (x.take(ti) - th0)  # ∇E: K_θ(θ − θ₀), 0 for q
-                # complete QR of Jᵀ (n × m): Q = [Y Z], R = upper triangle of qr[:m]
-                if big:
-                    qf, rf = np.linalg.qr(jac.T, mode="complete")
-                    rr, info, info2 = rf[:m], 0, 0
-                else:
-                    qr, tq, _, info = _lapack.dgeqrf(jac.T)
-                    qfull[:, :m] = qr
-                    qf, _, info2 = _lapack.dorgqr(qfull, tq)
-                    rr = qr[:m]  # R is its upper triangle (dtrtrs reads only that)
-                if info or info2:
-                    return None
-                # the rank test (RANK_TOL, as null_space) is made where the result is used: at
-                # convergence; before it a rank-deficient J gives a non-finite or clipped step
-                y, z = qf[:, :m], qf[:, m:]
-                f, info = _lapack.dtrtrs(rr, y.T @ tau)  # least-squares multiplier
-                if info:
-                    return None
-                r = tau - jac.T @ f
-                f6[self._task_rows] = f
-                hz = contract_hessian(st.hessian, f6).take(self._hidx).reshape(n, n)
-            if rot:
-                e = np.concatenate([pt - st.position, pin.log3(rt @ st.rotation.T)])
-                if rows is not None:
-                    e = e[rows]
-            else:
-                e = (pt - st.position)[rows]
-            ae = np.abs(e)
-            if rot:
-                ep = ae[ip].max() if ip.size else 0.0
-                er = ae[ir].max()
-            else:
-                ep, er = ae.max(), 0.0
+                st, jac, qf, rr, f, r, tau, hz = got
+            y, z = qf[:, :m], qf[:, m:]
+            e, ep, er = self._fast_error(st, pt, rt)
             rs = np.abs(r).max()
             es = e / escale
             kkt = math.sqrt(es @ es) + math.sqrt(r @ r) / kscale
             # the test of _residuals, with the end placed as accurately as the safeguarded
             # path's restoration places it (0.01·tol): wrench-driven loops (eq. 11) rely on it
             converged = ep <= 0.01 * tol_p and er <= 0.01 * tol and rs <= tol * max(np.abs(tau).max(), stat_floor)
+            red_step = None  # Zᵀ(K − H)Z of the polish step, reused (negated) for eq. (23)
             if converged and polish < POLISH_ITERATIONS:
                 # the residual test alone misses the error along a soft mode next to a
                 # bifurcation (error = residual / small eigenvalue): the Newton step is the
                 # error estimate; polish while it is not negligible
-                step = self._fast_step(kz, hz, z, y, rr, e, r, big)
+                step, red_step = self._fast_step(self._kz, hz, z, y, rr, e, r, big)
                 if step is not None and np.abs(step / self.var_scale).max() > POLISH_STEP:
                     polish += 1
-                    x = x.copy()
-                    x[free] += step
-                    flush_tiny(x)
+                    x = self._moved(x, step)
                     kkt_prev = np.inf
                     continue
             if converged:
-                _, sv, _, info = _lapack.dgesdd(rr * self._triu, compute_uv=0)
-                if info or not sv[-1] > RANK_TOL * sv[0]:  # descending
-                    return None
                 res = {"position": float(ep), "orientation": float(er), "statics": float(rs)}
-                # eq. (23) in the basis Z (its eigenvalues do not depend on the basis)
-                red = z.T @ (hz - kz) @ z
-                if big:
-                    ev = np.linalg.eigvalsh(0.5 * (red + red.T))
-                else:
-                    ev, _, info = _lapack.dsyevd(0.5 * (red + red.T), compute_v=0)
-                    if info:
-                        return None
-                thr = STABILITY_TOL * (spectral_norm(kt) if kt.size else 1.0)
-                stab = StabilityResult(bool(ev.size == 0 or ev.max() < -thr), ev, n - m, float(thr))
-                if self.follow_stable and not stab.stable:
-                    self._fast_its = it
+                fact = (key, self.kin, st, jac, qf, rr, f, r, tau, hz)
+                if not self._fast_accept(x, it, fact, f6, pt, rt, res, red_step, big):
                     return None
-                self._fast_cache = (key + f6.tobytes() + pt.tobytes() + rt.tobytes(), res, stab)
-                self._fast_fact = (key, kin, st, jac, qf, rr, f, r, tau, hz)
-                # the Blocks at this equilibrium, as evaluate_blocks would build them (the
-                # stiffness of a curve point is evaluated here next)
-                blocks = Blocks(jac[:, :nt], jac[:, nt:], hz[:nt, :nt], hz[:nt, nt:], hz[nt:, :nt], hz[nt:, nt:], kt, st)
-                remember_blocks(vm, kin, x, f6, blocks)
                 return x, f, it, st
             self._fast_its = it
             if it and not kkt < 0.5 * kkt_prev or it - polish >= self._fast_max_iter:
                 return None
-            w = kz - hz
-            red = z.T @ w @ z
-            if self.follow_stable:  # ½(red + redᵀ) − shift·I ≻ 0
-                sym = red + red.T
-                sym.flat[diag] -= 2.0 * shift
-                if big:
-                    try:
-                        np.linalg.cholesky(sym)
-                    except np.linalg.LinAlgError:
-                        return None
-                elif _lapack.dpotrf(sym, overwrite_a=1)[1]:
-                    return None  # not positive definite: the safeguarded path shifts it
-            py, info = _lapack.dtrtrs(rr, e, trans=1)  # Rᵀ p_Y = e
-            dy = y @ py
-            if big:
-                try:
-                    pz, info2 = np.linalg.solve(red, z.T @ (r + w @ dy)), 0
-                except np.linalg.LinAlgError:
-                    return None
-            else:
-                _, _, pz, info2 = _lapack.dgesv(red, z.T @ (r + w @ dy), overwrite_b=1)
-            if info or info2:
+            dx = self._fast_descent_step(hz, y, z, rr, e, r, big)
+            if dx is None:
                 return None
-            dx = dy - z @ pz
-            smax = np.abs(dx / self.var_scale).max()
-            if not smax <= self.max_step:  # also catches NaN
-                return None
-            x = x.copy()
-            x[free] += dx
-            flush_tiny(x)
+            x = self._moved(x, dx)
             kkt_prev = kkt
         return None
 
+    def _fast_factor(self, x, f6, qfull, big):
+        """The quantities of one :meth:`_fast_newton` iteration at ``x``: (state, J (task
+        rows, free columns), Q = [Y Z], R, multiplier F, static residual r, ∇E, Hessian
+        H(F) of Ψ); None when a factorisation fails. Writes F into ``f6`` (task rows)."""
+        kin, free, nt = self.kin, self.free, self.nt
+        m, n = len(self.task), len(free)
+        rows = None if self._all_task else self._task_rows
+        # the Hessian of Ψ in screw form from J (no kinematic Hessian tensor) when the
+        # model allows it (Kinematics.uses_screw), else Pinocchio's tensor contracted
+        screw = self._smask is not None and getattr(kin, "uses_screw", False)
+        st = kin.evaluate(x, hessian=not screw)
+        if not screw and st.hessian is None:
+            return None
+        jfree = st.jacobian.take(free, axis=1)  # (6, n), (θ, q) order
+        jac = jfree if rows is None else jfree[rows]
+        tau = np.zeros(n)
+        tau[:nt] = self.vm.K_theta @ (x.take(self.vm.theta_idx) - self.vm.theta0)  # ∇E: K_θ(θ − θ₀), 0 for q
+        # complete QR of Jᵀ (n × m): Q = [Y Z], R = upper triangle of qr[:m]
+        if big:
+            qf, rf = np.linalg.qr(jac.T, mode="complete")
+            rr, info, info2 = rf[:m], 0, 0
+        else:
+            qr, tq, _, info = _lapack.dgeqrf(jac.T)
+            qfull[:, :m] = qr
+            qf, _, info2 = _lapack.dorgqr(qfull, tq)
+            rr = qr[:m]  # R is its upper triangle (dtrtrs reads only that)
+        if info or info2:
+            return None
+        # the rank test (RANK_TOL, as null_space) is made where the result is used: at
+        # convergence; before it a rank-deficient J gives a non-finite or clipped step
+        f, info = _lapack.dtrtrs(rr, qf[:, :m].T @ tau)  # least-squares multiplier
+        if info:
+            return None
+        r = tau - jac.T @ f
+        f6[self._task_rows] = f
+        if screw:
+            hz = psi_hessian_screw(jfree, f6, self._smask)
+        else:
+            hz = contract_hessian(st.hessian, f6).take(self._hidx).reshape(n, n)
+        return st, jac, qf, rr, f, r, tau, hz
+
+    def _fast_error(self, st, pt, rt):
+        """Task error ``e`` (task rows) at the state ``st`` and its largest position and
+        orientation components (log3 only when orientation rows are constrained)."""
+        ip, ir = self._ip, self._ir
+        rows = None if self._all_task else self._task_rows
+        if ir.size > 0:
+            e = np.concatenate([pt - st.position, pin.log3(rt @ st.rotation.T)])
+            if rows is not None:
+                e = e[rows]
+            ae = np.abs(e)
+            ep = ae[ip].max() if ip.size else 0.0
+            er = ae[ir].max()
+        else:
+            e = (pt - st.position)[rows]
+            ep, er = np.abs(e).max(), 0.0
+        return e, ep, er
+
+    def _fast_accept(self, x, it, fact, f6, pt, rt, res, red_step, big) -> bool:
+        """At a converged :meth:`_fast_newton` point: the rank test of ``J``, the stability
+        verdict of eq. (23) and the caches for :meth:`_result` and :func:`evaluate_blocks`;
+        False when the point must go to the safeguarded path instead."""
+        key, kin, st, jac, qf, rr, _, _, _, hz = fact
+        vm, kt, nt = self.vm, self.vm.K_theta, self.nt
+        m, n = len(self.task), len(self.free)
+        _, sv, _, info = _lapack.dgesdd(rr * self._triu, compute_uv=0)
+        if info or not sv[-1] > RANK_TOL * sv[0]:  # descending
+            return False
+        # eq. (23) in the basis Z (its eigenvalues do not depend on the basis); the
+        # polish step's Zᵀ(K − H)Z negated is this matrix bit for bit
+        z = qf[:, m:]
+        red = -red_step if red_step is not None else z.T @ (hz - self._kz) @ z
+        if big:
+            ev = np.linalg.eigvalsh(0.5 * (red + red.T))
+        else:
+            ev, _, info = _lapack.dsyevd(0.5 * (red + red.T), compute_v=0)
+            if info:
+                return False
+        thr = STABILITY_TOL * (spectral_norm(kt) if kt.size else 1.0)
+        stab = StabilityResult(bool(ev.size == 0 or ev.max() < -thr), ev, n - m, float(thr))
+        if self.follow_stable and not stab.stable:
+            self._fast_its = it
+            return False
+        self._fast_cache = (key + f6.tobytes() + pt.tobytes() + rt.tobytes(), res, stab)
+        self._fast_fact = fact
+        # the Blocks at this equilibrium, as evaluate_blocks would build them (the
+        # stiffness of a curve point is evaluated here next)
+        blocks = Blocks(jac[:, :nt], jac[:, nt:], hz[:nt, :nt], hz[:nt, nt:], hz[nt:, :nt], hz[nt:, nt:], kt, st)
+        remember_blocks(vm, kin, x, f6, blocks)
+        return True
+
+    def _fast_descent_step(self, hz, y, z, rr, e, r, big):
+        """The Newton step of :meth:`_fast_newton` away from convergence; None when the reduced
+        matrix is not positive definite (``follow_stable``), a solve fails, or the step is
+        longer than ``max_step``."""
+        n, m = len(self.free), len(self.task)
+        w = self._kz - hz
+        red = z.T @ w @ z
+        if self.follow_stable:  # ½(red + redᵀ) − shift·I ≻ 0
+            sym = red + red.T
+            sym.flat[np.arange(n - m) * (n - m + 1)] -= 2.0 * (SHIFT_TOL * self.kscale)
+            if big:
+                try:
+                    np.linalg.cholesky(sym)
+                except np.linalg.LinAlgError:
+                    return None
+            elif _lapack.dpotrf(sym, overwrite_a=1)[1]:
+                return None  # not positive definite: the safeguarded path shifts it
+        py, info = _lapack.dtrtrs(rr, e, trans=1)  # Rᵀ p_Y = e
+        dy = y @ py
+        if big:
+            try:
+                pz, info2 = np.linalg.solve(red, z.T @ (r + w @ dy)), 0
+            except np.linalg.LinAlgError:
+                return None
+        else:
+            _, _, pz, info2 = _lapack.dgesv(red, z.T @ (r + w @ dy), overwrite_b=1)
+        if info or info2:
+            return None
+        dx = dy - z @ pz
+        smax = np.abs(dx / self.var_scale).max()
+        if not smax <= self.max_step:  # also catches NaN
+            return None
+        return dx
+
     def _fast_step(self, kz, hz, z, y, rr, e, r, big):
-        """The unmodified Newton step of :meth:`_fast_newton` (None if singular)."""
+        """The unmodified Newton step of :meth:`_fast_newton` (None if singular) and the reduced
+        matrix ``Zᵀ(K − H)Z`` it solved with (None if not formed)."""
         w = kz - hz
         red = z.T @ w @ z
         py, info = _lapack.dtrtrs(rr, e, trans=1)
         if info:
-            return None
+            return None, None
         dy = y @ py
-        try:
-            pz = np.linalg.solve(red, z.T @ (r + w @ dy))
-        except np.linalg.LinAlgError:
-            return None
+        rhs = z.T @ (r + w @ dy)
+        if big:
+            try:
+                pz = np.linalg.solve(red, rhs)
+            except np.linalg.LinAlgError:
+                return None, red
+        else:  # LAPACK directly (numpy's wrapper costs more at this size)
+            _, _, pz, info = _lapack.dgesv(red, rhs)
+            if info:
+                return None, red
         dx = dy - z @ pz
-        return dx if np.all(np.isfinite(dx)) else None
+        return (dx if np.all(np.isfinite(dx)) else None), red
 
     def _newton(self, x, f, p_t, r_t, max_iter):
         """Newton on eq. (5) (matrix of eq. 28), kept on the constraint ``g = t``.
@@ -639,9 +709,7 @@ class EquilibriumSolver:
                 return x, f, it, True, state
             if it == max_iter:
                 break
-            if state.hessian is None:  # restoration evaluates J only; the Hessian when needed
-                state = self.kin.evaluate(x)
-            h = state.psi_hessian(full_wrench(vm, f))[np.ix_(self.free, self.free)]
+            h = self._psi_hessian(x, state, full_wrench(vm, f))
             w = kz - h
             modified = False
             if self.follow_stable:
@@ -858,20 +926,7 @@ class EquilibriumSolver:
     def _vector6(self, v, name: str, unit: str) -> np.ndarray:
         """(6,) from 6 numbers, 3 numbers (x y z: the rest zero) or ``len(task)`` numbers (the
         task rows, in task order); :class:`InputError` on a wrong size or a NaN/inf."""
-        a = np.asarray(v, dtype=float).ravel()
-        m = len(self.task)
-        if a.size == 6:
-            out = a.copy()
-        elif a.size == 3:
-            out = np.concatenate([a, np.zeros(3)])
-        elif a.size == m:
-            out = np.zeros(6)
-            out[self.task] = a
-        else:
-            raise InputError(f"{name} must have 3, 6 or {m} (task) components ({unit}), got {a.size}")
-        if not np.all(np.isfinite(out)):
-            raise InputError(f"{name} contains NaN or infinite values: {a.tolist()}")
-        return out
+        return task_vector(v, self.task, name, unit, task_sized=True, outside_task="keep")
 
     def components(self, spec) -> tuple[int, ...]:
         """Task component indices (task order) from names (``"x"``, ``"rz"``; a string of
@@ -1258,7 +1313,7 @@ class EquilibriumSolver:
         """Quantities of the mixed Newton iteration at ``x``: (state, J, τ, ∇Π, Y, Z, R, λ, r, e)."""
         vm, free, nt = self.vm, self.free, self.nt
         tarr = np.asarray(self.task)
-        st = self.kin.evaluate(x, hessian=hessian)
+        st = self.kin.evaluate(x, hessian=hessian and not getattr(self.kin, "uses_screw", False))
         jac = st.jacobian[tarr][:, free]
         n = len(free)
         tau = np.zeros(n)
@@ -1293,17 +1348,14 @@ class EquilibriumSolver:
         ``local``: plain Newton steps only, each kept only if it halves the residual and is
         within the step limit (converges to the equilibrium next to ``x``, stable or not);
         otherwise shifted (descent) steps when ``follow_stable`` and a line search."""
-        kin = self.kin
-        free, m = self.free, len(self.task)
+        m = len(self.task)
         hrows = np.asarray(hrows, int)
         lrows = np.array([i for i in range(m) if i not in set(hrows.tolist())], int)
         tarr = np.asarray(self.task)
         hcomp = tarr[hrows]
         escale = self._err_scale[hrows]
         hp, hr = hcomp < 3, hcomp >= 3
-        kz = self._kz
         kscale = max(self.kscale, 1e-300)
-        shift = SHIFT_TOL * kscale
         tol = self.tol
         x = np.array(x, float)
         polish = escapes = 0
@@ -1322,25 +1374,7 @@ class EquilibriumSolver:
             load = np.abs(jac.T @ w6[tarr]).max() if jac.size else 0.0
             stat_scale = max(np.abs(tau).max() if tau.size else 0.0, load, 1e-6 * self.kscale)
             conv = ep <= 0.01 * tol * self.length_scale and er <= 0.01 * tol and rs <= tol * stat_scale
-            hz = st.psi_hessian(w6)[np.ix_(free, free)]
-            wm = kz - hz
-            red = z.T @ wm @ z
-            lmin = np.linalg.eigvalsh(0.5 * (red + red.T)).min() if red.size else np.inf
-            modified = False
-            if self.follow_stable and not local and lmin < shift:
-                red = red + (shift - lmin + 1e-3 * abs(lmin)) * np.eye(red.shape[0])
-                modified = True
-            with np.errstate(all="ignore"):
-                try:
-                    py = _solve_triangular(rr, e, trans="T") if len(hrows) else np.zeros(0)
-                except np.linalg.LinAlgError:
-                    py = np.full(len(hrows), np.nan)
-                dy = y @ py
-                try:
-                    pz = np.linalg.solve(red, z.T @ (r + wm @ dy))
-                except np.linalg.LinAlgError:
-                    pz = np.linalg.lstsq(red, z.T @ (r + wm @ dy), rcond=None)[0]
-                dx = dy - z @ pz
+            dx, wm, lmin, modified = self._mixed_step(x, st, w6, y, z, rr, e, r, len(hrows), local)
             if not np.all(np.isfinite(dx)):
                 return x, lam, it, conv, st
             if not conv and not modified and np.abs(dx / self.var_scale).max() <= POLISH_STEP:
@@ -1351,20 +1385,13 @@ class EquilibriumSolver:
             if conv and modified and not local and escapes < ESCAPE_MODES and lmin < -STABILITY_TOL * kscale:
                 # descent crept onto a saddle: leave it along its most negative curvature
                 escapes += 1
-                sym = z.T @ wm @ z
-                ev, vec = np.linalg.eigh(0.5 * (sym + sym.T))
-                v = z @ vec[:, 0]
-                x = x.copy()
-                x[free] += v * (self.max_step / max(np.abs(v / self.var_scale).max(), 1e-300))
-                flush_tiny(x)
+                x = self._mixed_escape(x, z, wm)
                 continue
             if conv:
                 if modified or polish >= POLISH_ITERATIONS or np.abs(dx / self.var_scale).max() <= POLISH_STEP:
                     return x, lam, it, True, st
                 polish += 1
-                x = x.copy()
-                x[free] += dx
-                flush_tiny(x)
+                x = self._moved(x, dx)
                 continue
             if it - polish >= max_iter:
                 break
@@ -1374,39 +1401,88 @@ class EquilibriumSolver:
                 if not (smax <= self.max_step and kkt0 < 0.5 * kkt_prev):
                     return x, lam, it, False, st
                 kkt_prev = kkt0
-                x = x.copy()
-                x[free] += dx
-                flush_tiny(x)
+                x = self._moved(x, dx)
                 continue
             if smax > self.max_step:
                 dx = dx * (self.max_step / smax)
                 modified = True
             rho = 2.0 * np.abs(lam) + 1e-9 * stat_scale * np.where(hp, 1.0 / self.length_scale, 1.0)
-            phi0 = self._potential(x, st, lrows, w_dead) + float(rho @ ae)
-            slope = min(float(gl @ dx) - float(rho @ ae), 0.0)
-            noise = 1e-13 * (abs(phi0) + self.energy(x) + 1e-300)
-            alpha, accepted = 1.0, False
-            for _ in range(40):
-                xn = x.copy()
-                xn[free] += alpha * dx
-                flush_tiny(xn)
-                stn, _, _, _, _, _, _, lamn, rn, en = self._mixed_state(xn, hrows, lrows, w_dead, p_t, r_t, False)
-                if np.all(np.isfinite(rn)) and np.all(np.isfinite(lamn)):
-                    if not self.follow_stable:
-                        accepted = True
-                    elif self._potential(xn, stn, lrows, w_dead) + float(rho @ np.abs(en)) <= (
-                        phi0 + 1e-4 * alpha * slope + noise
-                    ):
-                        accepted = True
-                    elif alpha == 1.0 and not modified:
-                        accepted = float(np.linalg.norm(en / escale) + np.linalg.norm(rn) / kscale) < 0.5 * kkt0
-                if accepted:
-                    break
-                alpha *= 0.5
-            if not accepted:
+            xn = self._mixed_line_search(
+                x, st, dx, gl, rho, ae, modified, kkt0, (hrows, lrows, w_dead, p_t, r_t)
+            )
+            if xn is None:
                 return x, lam, it + 1, False, st
             x = xn
         return x, lam, max_iter, False, st
+
+    def _mixed_step(self, x, st, w6, y, z, rr, e, r, nheld, local):
+        """The Newton step of :meth:`_mixed_newton` in the null-space form (eq. 28): returns
+        (dx, K − H, smallest eigenvalue of the reduced matrix, whether it was shifted to a
+        descent step (``follow_stable`` and not ``local``))."""
+        kz = self._kz
+        shift = SHIFT_TOL * max(self.kscale, 1e-300)
+        hz = self._psi_hessian(x, st, w6)
+        wm = kz - hz
+        red = z.T @ wm @ z
+        lmin = np.linalg.eigvalsh(0.5 * (red + red.T)).min() if red.size else np.inf
+        modified = False
+        if self.follow_stable and not local and lmin < shift:
+            red = red + (shift - lmin + 1e-3 * abs(lmin)) * np.eye(red.shape[0])
+            modified = True
+        with np.errstate(all="ignore"):
+            try:
+                py = _solve_triangular(rr, e, trans="T") if nheld else np.zeros(0)
+            except np.linalg.LinAlgError:
+                py = np.full(nheld, np.nan)
+            dy = y @ py
+            try:
+                pz = np.linalg.solve(red, z.T @ (r + wm @ dy))
+            except np.linalg.LinAlgError:
+                pz = np.linalg.lstsq(red, z.T @ (r + wm @ dy), rcond=None)[0]
+            dx = dy - z @ pz
+        return dx, wm, lmin, modified
+
+    def _mixed_escape(self, x, z, wm):
+        """``x`` moved off a saddle along the reduced matrix's most negative curvature, by the
+        step limit."""
+        sym = z.T @ wm @ z
+        _, vec = np.linalg.eigh(0.5 * (sym + sym.T))
+        v = z @ vec[:, 0]
+        x = x.copy()
+        x[self.free] += v * (self.max_step / max(np.abs(v / self.var_scale).max(), 1e-300))
+        flush_tiny(x)
+        return x
+
+    def _mixed_line_search(self, x, st, dx, gl, rho, ae, modified, kkt0, problem):
+        """Backtracking along ``dx`` on the merit ``E − w_Lᵀ t_L + ρ·|e|`` (``follow_stable``;
+        otherwise the full step); the new configuration, or None when no step is accepted.
+        ``problem``: (held rows, loaded rows, dead wrench, target position, rotation)."""
+        hrows, lrows, w_dead, p_t, r_t = problem
+        free = self.free
+        escale = self._err_scale[hrows]
+        kscale = max(self.kscale, 1e-300)
+        phi0 = self._potential(x, st, lrows, w_dead) + float(rho @ ae)
+        slope = min(float(gl @ dx) - float(rho @ ae), 0.0)
+        noise = 1e-13 * (abs(phi0) + self.energy(x) + 1e-300)
+        alpha, accepted = 1.0, False
+        for _ in range(40):
+            xn = x.copy()
+            xn[free] += alpha * dx
+            flush_tiny(xn)
+            stn, _, _, _, _, _, _, lamn, rn, en = self._mixed_state(xn, hrows, lrows, w_dead, p_t, r_t, False)
+            if np.all(np.isfinite(rn)) and np.all(np.isfinite(lamn)):
+                if not self.follow_stable:
+                    accepted = True
+                elif self._potential(xn, stn, lrows, w_dead) + float(rho @ np.abs(en)) <= (
+                    phi0 + 1e-4 * alpha * slope + noise
+                ):
+                    accepted = True
+                elif alpha == 1.0 and not modified:
+                    accepted = float(np.linalg.norm(en / escale) + np.linalg.norm(rn) / kscale) < 0.5 * kkt0
+            if accepted:
+                return xn
+            alpha *= 0.5
+        return None
 
     def _mixed_result(self, x, lam, iters, ok, st, hrows, w_dead, p_t, r_t, path) -> EquilibriumResult:
         vm, m = self.vm, len(self.task)

@@ -66,14 +66,15 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import pinocchio as pin
 
+from vjm_pin.exceptions import InputError, NoEquilibrium, SingularStiffness
+from vjm_pin.kinematics.chain import contract_hessian, deflection, displace, pose_error
 from vjm_pin.kinematics.closures import RANK_RTOL, ClosureSet, constraint_rank
 from vjm_pin.kinematics.dead_loads import DeadLoads, Load
-from vjm_pin.exceptions import InputError, NoEquilibrium, SingularStiffness
 from vjm_pin.kinematics.frames import FrameKinematics
-from vjm_pin.kinematics.chain import contract_hessian, deflection, displace, pose_error
+from vjm_pin.kinematics.shared import data_for
 from vjm_pin.model.format import VjmModel
 from vjm_pin.solver.stability import STABILITY_TOL, StabilityResult, spectral_norm
-from vjm_pin.solver.stiffness import SINGULAR_RCOND, StiffnessResult, _rcond
+from vjm_pin.solver.stiffness import StiffnessResult
 from vjm_pin.solver.threads import one_blas_thread
 
 #: Names of the six task components, in order.
@@ -89,6 +90,9 @@ LOCAL_MAX_ITER = 12
 DESCENT_ITER_FACTOR = 8
 #: Largest step (rad, or ×L_c for prismatic coordinates) of one Newton iteration.
 MAX_STEP = 0.3
+#: A dead-loaded solve whose descent moves a coordinate further than this (rad, or × the length
+#: scale) from the start is checked against the loading path (:meth:`MechanismSolver._on_loading_path`).
+FAR_JUMP = 1.0
 #: Rotation-target iterations of a task holding some but not all rotations, and their tolerance (rad).
 ROTATION_TARGET_ITER = 30
 ROTATION_TARGET_TOL = 1e-12
@@ -129,6 +133,9 @@ class MechanismResult:
             task rows ``"task.<c>"``) of the stacked (closure + held) Jacobian at ``x``.
         multipliers_note: Why the multipliers are a choice (None when they are unique).
         warnings: Plain-language notes.
+        held_axes: (k, 6) the held task axes (world components) when the solver holds task
+            directions other than the components (:meth:`MechanismSolver.with_task_axes`;
+            ``held`` is then empty); None otherwise.
     """
 
     x: np.ndarray
@@ -152,6 +159,7 @@ class MechanismResult:
     redundant: tuple[str, ...] = ()
     multipliers_note: str | None = None
     warnings: tuple[str, ...] = ()
+    held_axes: np.ndarray | None = None
 
     @property
     def stable(self) -> bool | None:
@@ -166,6 +174,36 @@ class MechanismResult:
     def residual(self) -> float:
         """Largest residual (mixed units; 0 at an exact equilibrium)."""
         return float(max(self.residuals.values())) if self.residuals else float("nan")
+
+
+@dataclass(frozen=True)
+class Linearization:
+    """The mechanism linearised at one configuration (:meth:`MechanismSolver.linearize`).
+
+    Attributes:
+        x: (nq,) configuration (m, rad).
+        hessian: (n, n) ``W = K − ∂Q/∂z − H(w) − Σ μ_k ∂²c_k/∂z²`` on ``z = (θ, q)`` (N·m/rad,
+            N/m, N/rad), the multipliers solved by least squares from the stationarity at ``x``
+            (exact at an equilibrium).
+        closure_jacobian: (m_c, n) ``C`` on ``z``; ``closure_independent``: its independent rows
+            (indices, :func:`~vjm_pin.kinematics.closures.constraint_rank`).
+        task_jacobian: (6, n) task-frame Jacobian on ``z`` (world axes, every component).
+        wrench: (6,) total task wrench (N, N·m): dead on loaded rows, reaction on held rows.
+        closure_multipliers: (m_c,) ``μ`` (minimum-norm when redundant).
+        held_rows: (k, 6) the held task axes (world components).
+        independent_multipliers: The multipliers of the independent closure rows
+            (``closure_independent`` order) that carry the generalised force with them alone.
+    """
+
+    x: np.ndarray
+    hessian: np.ndarray
+    closure_jacobian: np.ndarray
+    closure_independent: np.ndarray
+    task_jacobian: np.ndarray
+    wrench: np.ndarray
+    closure_multipliers: np.ndarray
+    held_rows: np.ndarray
+    independent_multipliers: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 @dataclass
@@ -276,7 +314,7 @@ class MechanismSolver:
         end0 = ref[vm.frame_id]
         self.p0, self.r0 = end0.position.copy(), end0.rotation.copy()
         self._load_ref = [(ref[f].position.copy(), ref[f].rotation.copy()) for f in self.loads.load_frame_ids]
-        data = model.createData()
+        data = data_for(model)  # the thread's shared Data (kinematics/shared.py)
         pin.forwardKinematics(model, data, vm.reference)
         pts = [m.translation for m in data.oMi[1:]] + [self.p0]
         self.length_scale = max(max(np.linalg.norm(p - self.p0) for p in pts), 1e-3)
@@ -291,6 +329,151 @@ class MechanismSolver:
         self._cscale = np.array(
             [self.length_scale if c in ("x", "y", "z") else 1.0 for cl in self.closures.closures for c in cl.components]
         )
+        # task axes: rows (world components) of the task coordinates that held/loaded rows index
+        self._axes = np.eye(6)[self.task]
+        self._axis_labels = tuple(f"task.{COMPONENTS[c]}" for c in self.task)
+        self._axis_translation = np.array([c < 3 for c in self.task], bool)
+        self._custom_axes = False
+
+    def with_task_axes(self, axes) -> MechanismSolver:
+        """A solver sharing this one's kinematics whose task coordinates are the rows of ``axes``
+        instead of the task components: the held rows ``hrows`` of the internal Newton
+        (``_solve_target``, :meth:`linearize`) index these rows, the loaded ones carry the dead
+        wrench projected on them (the free-platform curve of
+        :func:`~vjm_pin.analysis.curve.trace_curve` holds one direction ``d`` and loads the rest
+        with zero). Results of such a solver report ``held_axes`` instead of ``held``.
+
+        Args:
+            axes: (m, 6) orthonormal rows (world components) spanning the task components, each
+                a pure translation or a pure rotation.
+        """
+        import copy
+
+        t = np.asarray(axes, float)
+        m = len(self.task)
+        off = [i for i in range(6) if i not in self.task]
+        pure = all(not (np.any(r[:3]) and np.any(r[3:])) for r in t) if t.ndim == 2 else False
+        if (t.shape != (m, 6) or not np.all(np.isfinite(t)) or not pure
+                or np.abs(t[:, off]).max(initial=0.0) > 0 or not np.allclose(t @ t.T, np.eye(m), atol=1e-12)):
+            raise InputError(
+                f"task axes must be {m} orthonormal rows of 6 (translation or rotation) spanning the task components"
+            )
+        new = copy.copy(self)
+        new._axes = t.copy()
+        new._axis_labels = tuple(f"task.axis{i}" for i in range(m))
+        new._axis_translation = np.array([bool(np.any(r[:3])) for r in t], bool)
+        new._custom_axes = True
+        return new
+
+    def sibling(self, **options) -> MechanismSolver:
+        """A copy sharing the kinematics (one ``pin.Data``) with some of ``follow_stable``,
+        ``restarts``, ``tol``, ``max_iter`` changed."""
+        import copy
+
+        new = copy.copy(self)
+        for k, v in options.items():
+            if k not in ("follow_stable", "restarts", "tol", "max_iter"):
+                raise InputError(f"sibling options are follow_stable, restarts, tol, max_iter; got {k!r}")
+            setattr(new, k, type(getattr(self, k))(v))
+        return new
+
+    def at_reference(self, vm: VjmModel) -> MechanismSolver:
+        """A copy sharing the kinematics (one ``pin.Data``) for ``vm``: the same Pinocchio model,
+        task, springs, roles and closures with another reference configuration and rest values
+        (actuators moved and the mechanism re-assembled: the poses of a map, issue 14). What
+        depends on the reference is recomputed as in ``__init__`` (``p0``, ``r0``, the load
+        frames' reference placements, ``L_c``), so the numbers equal a new solver's.
+
+        Raises:
+            InputError: ``vm`` differs in more than its reference and rest values.
+        """
+        import copy
+
+        old = self.vm
+        same = (
+            isinstance(vm, VjmModel) and vm.model is old.model and vm.frame_id == old.frame_id
+            and tuple(vm.task) == tuple(old.task) and vm.closures == old.closures
+            and np.array_equal(vm.theta_idx, old.theta_idx) and np.array_equal(vm.q_idx, old.q_idx)
+            and np.array_equal(vm.K_theta, old.K_theta)
+        )
+        if not same:
+            raise InputError("at_reference takes the solver's model with another reference configuration only")
+        new = copy.copy(self)
+        new.vm = vm
+        ref = self.frames.evaluate(vm.reference, hessian=False)
+        end0 = ref[vm.frame_id]
+        new.p0, new.r0 = end0.position.copy(), end0.rotation.copy()
+        new._load_ref = [(ref[f].position.copy(), ref[f].rotation.copy()) for f in self.loads.load_frame_ids]
+        data = data_for(vm.model)  # the thread's shared Data (kinematics/shared.py)
+        pin.forwardKinematics(vm.model, data, vm.reference)
+        pts = [m.translation for m in data.oMi[1:]] + [new.p0]
+        new.length_scale = max(max(np.linalg.norm(p - new.p0) for p in pts), 1e-3)
+        new.var_scale = np.where(new._prism, new.length_scale, 1.0) if len(self.free) else np.zeros(0)
+        new._cscale = np.array(
+            [new.length_scale if c in ("x", "y", "z") else 1.0 for cl in self.closures.closures for c in cl.components]
+        )
+        return new
+
+    def linearize(self, x, hrows, wrench=None, state=None) -> Linearization:
+        """The :class:`Linearization` at ``x`` with the task axes ``hrows`` held and the dead
+        task ``wrench`` (6,) on the others (default zero); ``state``: the internal state there
+        when already evaluated with the Hessian (``_newton``'s last)."""
+        w = np.zeros(6) if wrench is None else np.asarray(wrench, float)
+        s = state if state is not None else self._state(
+            np.asarray(x, float), hrows, w, self.p0, self.r0, 1.0, True
+        )
+        nc = s.cstate.residual.size
+        c = s.cstate.jacobian[:, self.free]
+        ind = np.array([i for i in s.indep if i < nc], int) if nc else np.zeros(0, int)
+        return Linearization(
+            x=np.asarray(x, float).copy(),
+            hessian=self._hessian(s),
+            closure_jacobian=c,
+            closure_independent=ind,
+            task_jacobian=s.end.jacobian[:, self.free],
+            wrench=s.w6.copy(),
+            closure_multipliers=s.nu[:nc].copy(),
+            held_rows=self._split_axes(hrows)[0],
+            independent_multipliers=np.asarray(s.nu_i[: len(ind)], float).copy(),
+        )
+
+    def kkt_residual(self, x, hrows, w_dead, p_t, r_t, closure_rows, mu, nu):
+        """The equilibrium residuals at ``x`` without Hessians (a chord corrector's): the
+        stationarity ``r = ∇Π − C_Iᵀμ − (H J)ᵀν`` (free order), the held rows' ``b_h`` (target
+        minus current, ``H J δz = b_h``), the closure residual ``c`` (every row) and the
+        convergence test of the Newton iteration (:meth:`_newton`'s, with these multipliers).
+        ``closure_rows``: the independent closure rows ``μ`` belongs to."""
+        vm, free = self.vm, self.free
+        th, tl = self._split_axes(hrows)
+        states = self.frames.evaluate(x, hessian=False)
+        end = states[vm.frame_id]
+        cst = self.closures.evaluate(x, hessian=False)
+        lst = self.loads.evaluate(x, hessian=False)
+        tau = np.zeros(len(free))
+        tau[: self.nt] = vm.K_theta @ (x[vm.theta_idx] - vm.theta0)
+        jz = end.jacobian[:, free]
+        qload = lst.force[free] + jz.T @ (tl.T @ (tl @ w_dead))
+        ci = cst.jacobian[closure_rows][:, free]
+        react = ci.T @ mu + (th @ jz).T @ nu
+        r = tau - qload - react
+        bh = th @ pose_error(p_t, r_t, end.position, end.rotation)
+        c = cst.residual
+        pos = self._is_position_row(hrows)
+        ab = np.abs(np.concatenate([c, bh]))
+        ep = ab[pos].max(initial=0.0)
+        er = ab[~pos].max(initial=0.0)
+        stat_scale = max(np.abs(tau).max(initial=0.0), np.abs(qload).max(initial=0.0),
+                         np.abs(react).max(initial=0.0), 1e-6 * self.kscale)
+        conv = (ep <= 0.01 * self.tol * self.length_scale and er <= 0.01 * self.tol
+                and np.abs(r).max(initial=0.0) <= self.tol * stat_scale)
+        return r, bh, c, bool(conv)
+
+    def _split_axes(self, hrows) -> tuple[np.ndarray, np.ndarray]:
+        """(held rows, loaded rows) of the task axes, world components."""
+        h = np.asarray(hrows, int)
+        mask = np.ones(len(self._axes), bool)
+        mask[h] = False
+        return self._axes[h], self._axes[mask]
 
     # ----------------------------------------------------------------- inputs
     def components(self, spec) -> tuple[int, ...]:
@@ -337,10 +520,10 @@ class MechanismSolver:
         """Total potential (J): springs minus the work of the loads (a moment's work through
         ``log3(R R0ᵀ)``, exact for forces; a dead moment has no exact potential in 3-D)."""
         pot = self.energy(x)
-        tl = np.asarray(self.task, int)[lrows]
+        tl = self._axes[np.asarray(lrows, int)]
         if tl.size:
             d = deflection(self.p0, self.r0, end.position, end.rotation)
-            pot -= float(w_dead[tl] @ d[tl])
+            pot -= float((tl @ w_dead) @ (tl @ d))
         if factor:
             states = self.frames.evaluate(x, hessian=False)
             for ld, fid, (p0, r0) in zip(self.loads.loads, self.loads.load_frame_ids, self._load_ref):
@@ -354,9 +537,7 @@ class MechanismSolver:
 
     def _state(self, x, hrows, w_dead, p_t, r_t, factor, hessian) -> _State:
         vm, free = self.vm, self.free
-        tarr = np.asarray(self.task, int)
-        hcomp = tarr[np.asarray(hrows, int)]
-        lcomp = np.array([c for c in tarr if c not in set(hcomp.tolist())], int)
+        th, tl = self._split_axes(hrows)
         states = self.frames.evaluate(x, hessian=hessian)
         end = states[vm.frame_id]
         cst = self.closures.evaluate(x, hessian=hessian)
@@ -365,14 +546,13 @@ class MechanismSolver:
         tau = np.zeros(n)
         tau[: self.nt] = vm.K_theta @ (x[vm.theta_idx] - vm.theta0)
         jz = end.jacobian[:, free]
-        wl = np.zeros(6)
-        wl[lcomp] = w_dead[lcomp]
+        wl = tl.T @ (tl @ w_dead)
         qload = factor * lst.force[free] + jz.T @ wl
         grad = tau - qload
-        a = np.vstack([cst.jacobian[:, free], jz[hcomp]])
-        e = pose_error(p_t, r_t, end.position, end.rotation)[hcomp]
+        a = np.vstack([cst.jacobian[:, free], th @ jz])
+        e = th @ pose_error(p_t, r_t, end.position, end.rotation)
         b = np.concatenate([-cst.residual, e])
-        bscale = np.concatenate([self._cscale, np.where(hcomp < 3, self.length_scale, 1.0)])
+        bscale = np.concatenate([self._cscale, np.where(self._axis_translation[np.asarray(hrows, int)], self.length_scale, 1.0)])
         k = a.shape[0]
         if k:
             info = constraint_rank(a, rtol=self.rank_rtol)
@@ -396,8 +576,7 @@ class MechanismSolver:
                 u, s, vt = np.linalg.svd(a.T, full_matrices=False)
                 g = a[indep].T @ nu_i
                 nu = vt[:ki].T @ ((u[:, :ki].T @ g) / s[:ki])
-        w6 = wl.copy()
-        w6[hcomp] = nu[cst.residual.size :]
+        w6 = wl + th.T @ nu[cst.residual.size :]
         dload = None
         if hessian:
             dload = factor * lst.derivative[np.ix_(free, free)]
@@ -439,7 +618,10 @@ class MechanismSolver:
             conv = ep <= 0.01 * tol * lc and er <= 0.01 * tol and rs <= tol * stat_scale
             wm = self._hessian(s)
             red = s.z.T @ wm @ s.z
-            lmin = np.linalg.eigvalsh(0.5 * (red + red.T)).min() if red.size else np.inf
+            if self.follow_stable and not local:
+                lmin = np.linalg.eigvalsh(0.5 * (red + red.T)).min() if red.size else np.inf
+            else:  # the plain Newton: no shift, no escape (the smallest eigenvalue is not used)
+                lmin = np.inf
             modified = False
             if self.follow_stable and not local and lmin < shift:
                 # mirror a negative curvature (min eigenvalue |λ_min| + shift): a near-singular
@@ -531,14 +713,12 @@ class MechanismSolver:
         """The task-frame state and the constraint right-hand side ``b`` at a trial point."""
         end = self.frames.evaluate(x, hessian=False)[self.vm.frame_id]
         cst = self.closures.evaluate(x, hessian=False)
-        hcomp = np.asarray(self.task, int)[np.asarray(hrows, int)]
-        e = pose_error(p_t, r_t, end.position, end.rotation)[hcomp]
+        e = self._split_axes(hrows)[0] @ pose_error(p_t, r_t, end.position, end.rotation)
         return end, np.concatenate([-cst.residual, e])
 
     def _is_position_row(self, hrows) -> np.ndarray:
-        hc = np.asarray(self.task, int)[np.asarray(hrows, int)]
         cp = np.array([c in ("x", "y", "z") for cl in self.closures.closures for c in cl.components], bool)
-        return np.concatenate([cp, hc < 3])
+        return np.concatenate([cp, self._axis_translation[np.asarray(hrows, int)]])
 
     def _perturb(self, x, rng) -> np.ndarray:
         xn = x.copy()
@@ -591,6 +771,18 @@ class MechanismSolver:
             raise InputError(f"x0 must be a finite configuration of size {self.vm.model.nq}")
         hrows = [self.task.index(c) for c in hcomp]
         res = self._rotation_targets(d, hcomp, hrows, w, x)
+        if not res.converged and raise_on_failure and "+path-" in res.path:
+            kind, rest = res.path.split("+path-")[1].split("(", 1)
+            span, far = rest.rstrip(")").split(";far=")
+            lo, hi = (float(v) for v in span.split("-"))
+            what = "stops (a limit load)" if kind == "ends" else "loses its stability"
+            raise NoEquilibrium(
+                f"buckling: the loading path {what} between {lo:.3g} and {hi:.3g} × the load, so this load "
+                f"exceeds a critical load; past it the mechanism jumps to a distant equilibrium "
+                f"({float(far):.3g} m deflection), reported as no equilibrium of the load path",
+                res,
+                res.residual(),
+            )
         if not res.converged and raise_on_failure:
             names = " ".join(COMPONENTS[c] for c in hcomp) or "none"
             raise NoEquilibrium(
@@ -637,6 +829,13 @@ class MechanismSolver:
             x, it, ok, _ = self._newton(x_start, hrows, w_dead, p_t, r_t, 1.0, DESCENT_ITER_FACTOR * self.max_iter)
             total += it
             label += "+descent"
+            if ok and self._dead_loaded(w_dead) and self._jump(x, x_start) > FAR_JUMP:
+                # The descent may land on a distant equilibrium that loading never reaches (past a
+                # limit load the structure snaps through): accept what load continuation reaches.
+                x, ok, it, label = self._on_loading_path(x, x_start, hrows, w_dead, p_t, r_t, label)
+                total += it
+                if not ok:
+                    return self._result(x, total, ok, hrows, w_dead, p_t, r_t, label)
         if not ok:
             rng = np.random.default_rng(self.seed)
             ps = self.frames.evaluate(x_start, hessian=False)[self.vm.frame_id]
@@ -661,9 +860,58 @@ class MechanismSolver:
                     break
         return self._result(x, total, ok, hrows, w_dead, p_t, r_t, label)
 
-    def _result(self, x, iters, ok, hrows, w_dead, p_t, r_t, path) -> MechanismResult:
+    def _jump(self, x, x0) -> float:
+        """Largest change of a free coordinate from ``x0`` to ``x`` (rad; prismatic ones per
+        the mechanism's length scale)."""
+        dz = (np.asarray(x, float) - np.asarray(x0, float))[self.free]
+        return float(np.abs(dz / self.var_scale).max()) if dz.size else 0.0
+
+    def _dead_loaded(self, w_dead) -> bool:
+        """A dead load acts: a task wrench, loads at frames or link weights."""
+        return bool(np.any(w_dead)) or bool(self.loads.loads) or self.loads.gravity is not None
+
+    def _on_loading_path(self, x_far, x_start, hrows, w_dead, p_t, r_t, label):
+        """Is the descent's equilibrium ``x_far`` what loading reaches? Plain-Newton load
+        continuation from ``x_start`` (4, then 16 steps), each step judged under the control
+        as run. A path stable up to the full load gives its end (the equilibrium loading
+        reaches); a path that turns unstable before the full load means the load exceeds a
+        critical load: ``ok=False`` with a label naming the bracket (``path-unstable(a_lo-a_hi;
+        far=…)``, fractions of the load, and the distance of the descent's equilibrium). When the
+        plain Newton cannot follow the path at all (a singular start, e.g. a straight chain of
+        passive joints under a lateral load) nothing is concluded and ``x_far`` stands.
+        Returns ``(x, ok, iterations, label)``."""
+        ps = self.frames.evaluate(x_start, hessian=False)[self.vm.frame_id]
+        dlog = pin.log3(r_t @ ps.rotation.T)
+        total, lo, step, kind = 0, 0.0, 1.0, "ends"
+        for nsteps in (4, 16):
+            xc, okc = x_start.copy(), True
+            for k in range(1, nsteps + 1):
+                a = k / nsteps
+                pk = (1 - a) * ps.position + a * p_t
+                rk = pin.exp3(a * dlog) @ ps.rotation
+                xc, itc, okc, st = self._newton(xc, hrows, a * w_dead, pk, rk, a, self.max_iter, local=True)
+                total += itc
+                if okc and st is not None and self._result(xc, 0, True, hrows, a * w_dead, pk, rk, "", state=st).stable is False:
+                    okc, kind = False, "unstable"
+                if not okc:
+                    if (k - 1) / nsteps >= lo:
+                        lo, step = (k - 1) / nsteps, 1 / nsteps
+                    break
+            if okc:
+                return xc, True, total, label + f"+continuation({nsteps})"
+            if kind == "unstable":
+                break
+        if kind == "ends":  # plain Newton cannot follow (e.g. a singular start): nothing to conclude
+            return x_far, True, total, label + "+path-unchecked"
+        far = float(np.linalg.norm(self._result(x_far, 0, True, hrows, w_dead, p_t, r_t, "").deflection[:3]))
+        hi = min(1.0, lo + step)
+        return x_start, False, total, label + f"+path-{kind}({lo:.4g}-{hi:.4g};far={far:.4g})"
+
+    def _result(self, x, iters, ok, hrows, w_dead, p_t, r_t, path, state=None, verdicts=True) -> MechanismResult:
+        """The result at ``x`` (``state``: the :class:`_State` there when already evaluated with the
+        Hessian; ``verdicts=False`` skips both stability verdicts: the caller judges)."""
         vm = self.vm
-        s = self._state(x, hrows, w_dead, p_t, r_t, 1.0, True)
+        s = state if state is not None else self._state(x, hrows, w_dead, p_t, r_t, 1.0, True)
         nc = s.cstate.residual.size
         tarr = np.asarray(self.task, int)
         hcomp = tarr[np.asarray(hrows, int)]
@@ -683,14 +931,14 @@ class MechanismSolver:
             "statics": top(rabs, ~self._prism),
             "statics_prismatic": top(rabs, self._prism),
         }
-        labels = tuple(self.closure_labels) + tuple(f"task.{COMPONENTS[c]}" for c in hcomp)
+        labels = tuple(self.closure_labels) + tuple(self._axis_labels[i] for i in hrows)
         redundant = tuple(labels[i] for i in s.redundant)
         note = (
             MULTIPLIERS_NOTE.format(n=len(redundant), labels=", ".join(redundant)) if redundant else None
         )
         stab = end = None
         warnings: tuple[str, ...] = ()
-        if ok:
+        if ok and verdicts:
             wm = self._hessian(s)
             z, _ = _null_basis(s.a, self.rank_rtol)
             stab = _verdict(wm, z, self.threshold)
@@ -719,34 +967,72 @@ class MechanismSolver:
             residuals=res,
             energy=self.energy(x),
             path=path,
-            held=tuple(int(c) for c in hcomp),
+            held=() if self._custom_axes else tuple(int(c) for c in hcomp),
             stability=stab,
             stability_end_held=end,
             redundant=redundant,
             multipliers_note=note,
             warnings=warnings,
+            held_axes=self._axes[np.asarray(hrows, int)].copy() if self._custom_axes else None,
         )
+
+    # ----------------------------------------------------------------- unstable modes
+    def unstable_modes(self, res: MechanismResult) -> tuple[np.ndarray, np.ndarray]:
+        """The directions in which the equilibrium ``res`` is unstable (the verdict ``stable``).
+
+        Eigenvectors ``v`` of the symmetric part of ``−ZᵀWZ`` (``Z`` the null space of the
+        closure + held rows, ``W`` as in the Newton iteration) whose eigenvalue is not below
+        ``−threshold`` (eq. 23 form), as configuration directions ``δx = Z v`` (nq,), zero on
+        the rigid actuated coordinates, unit Euclidean norm (m and rad mixed).
+
+        Returns:
+            (eigenvalues (k,), ascending order of −curvature; modes (nq, k)); k = 0 when stable.
+        """
+        hrows = [self.task.index(c) for c in res.held]
+        s = self._state(np.asarray(res.x, float), hrows, np.asarray(res.wrench, float), self.p0, self.r0, 1.0, True)
+        z, _ = _null_basis(s.a, self.rank_rtol)
+        red = -(z.T @ self._hessian(s) @ z)
+        if not red.size:
+            return np.zeros(0), np.zeros((self.vm.model.nq, 0))
+        ev, vec = np.linalg.eigh(0.5 * (red + red.T))
+        bad = ev >= -self.threshold
+        modes = np.zeros((self.vm.model.nq, int(bad.sum())))
+        modes[self.free] = z @ vec[:, bad]
+        return ev[bad], modes
 
     # ----------------------------------------------------------------- stiffness
     @one_blas_thread
-    def stiffness(self, res: MechanismResult) -> StiffnessResult:
-        """Loaded Cartesian stiffness K_C of the task frame at the equilibrium ``res`` (eq. 28
-        bordered with the independent closure rows; every task row is an output)::
+    def stiffness(self, res: MechanismResult, method: str = "eq28") -> StiffnessResult:
+        """Loaded Cartesian stiffness K_C of the task frame at the equilibrium ``res`` (paper
+        eq. 28–33 with the independent closure rows ``C_I``; every task row is an output).
+
+        ``method="eq28"`` solves the bordered system::
 
             [[0, 0, J], [0, 0, C_I], [Jᵀ, C_Iᵀ, −W]] [δw; δμ; δz] = [δt; 0; 0]
 
-        ``W`` as in the Newton iteration, with the total task wrench of ``res`` and its
-        closure multipliers. Returns a :class:`StiffnessResult` (``method="eq28-closures"``;
+        ``"eq30"``, ``"eq32"``, ``"eq33"`` apply the paper's formulas with the closure rows
+        bordered like passive-joint rows (:func:`~vjm_pin.solver.stiffness.border_closures`: the
+        multipliers ``δμ`` are passive coordinates of zero stiffness); eq. (32)/(33) need
+        ``K_θ − H_θθ`` (and for eq. 33 ``J_θ k_θ^F J_θᵀ``) invertible. ``W`` (equivalently
+        the blocks ``H − K`` of eq. 28) as in the Newton iteration, with the total task wrench
+        of ``res`` and its closure multipliers (minimum-norm when redundant: K_C does not depend
+        on that choice). Returns a :class:`StiffnessResult` (``method="<method>-closures"``;
         ``dq_dt``/``dtheta_dt`` the passive/spring sensitivities).
 
         Raises:
             NoEquilibrium: ``res`` did not converge.
             SingularStiffness: a task row depends on the closure rows (the task frame cannot move
                 that way: infinite stiffness), or the matrix is singular (a critical point).
+            InputError: an unknown ``method``.
         """
+        from vjm_pin.solver.blocks import Blocks
+        from vjm_pin.solver.stiffness import CLOSURE_METHODS, stiffness_with_closures
+
+        if method not in CLOSURE_METHODS:
+            raise InputError(f"unknown stiffness method {method!r}; choose one of {', '.join(CLOSURE_METHODS)}")
         if not res.converged:
             raise NoEquilibrium("loaded stiffness of an equilibrium that did not converge", res, res.residual())
-        vm, free = self.vm, self.free
+        vm, free, nt = self.vm, self.free, self.nt
         tarr = np.asarray(self.task, int)
         x = np.asarray(res.x, float)
         states = self.frames.evaluate(x, hessian=True)
@@ -756,9 +1042,7 @@ class MechanismSolver:
         nc = cst.residual.size
         c = cst.jacobian[:, free]
         j = end.jacobian[tarr][:, free]
-        stacked = np.vstack([c, j])
-        m = len(tarr)
-        info = constraint_rank(stacked, rtol=self.rank_rtol)
+        info = constraint_rank(np.vstack([c, j]), rtol=self.rank_rtol)
         lost = [i - nc for i in info.redundant if i >= nc]
         if lost:
             raise SingularStiffness(
@@ -767,32 +1051,44 @@ class MechanismSolver:
                 info.singular_values,
             )
         ci = c[[i for i in info.independent if i < nc]] if nc else np.zeros((0, len(free)))
-        w = self.kz - lst.derivative[np.ix_(free, free)] - contract_hessian(end.hessian, res.wrench)[np.ix_(free, free)]
+        # H of eq. (16) for the Lagrangian: dead loads, total task wrench, closure multipliers
+        h = lst.derivative[np.ix_(free, free)] + contract_hessian(end.hessian, res.wrench)[np.ix_(free, free)]
         if nc:
-            w = w - cst.hessian(res.closure_multipliers)[np.ix_(free, free)]
-        k, n = ci.shape[0], len(free)
-        big = np.zeros((m + k + n, m + k + n))
-        big[:m, m + k :] = j
-        big[m : m + k, m + k :] = ci
-        big[m + k :, :m] = j.T
-        big[m + k :, m : m + k] = ci.T
-        big[m + k :, m + k :] = -w
-        rhs = np.zeros((m + k + n, m))
-        rhs[:m] = np.eye(m)
-        if _rcond(big) < SINGULAR_RCOND:  # judged on the equilibrated matrix (units mix)
-            sv = np.linalg.svd(big, compute_uv=False)
-            raise SingularStiffness(
-                "the bordered matrix of eq. (28) with the closure rows is singular: the equilibrium is at a "
-                "critical point (bifurcation/buckling) of the loaded mechanism",
-                sv,
-            )
-        sol = np.linalg.solve(big, rhs)
-        kc, dz = sol[:m], sol[m + k :]
-        k6 = np.zeros((6, 6))
-        k6[np.ix_(tarr, tarr)] = kc
-        dt6 = np.zeros((n, 6))
-        dt6[:, tarr] = dz
-        return StiffnessResult(k6, dt6[self.nt :], dt6[: self.nt], "eq28-closures", tuple(self.task))
+            h = h + cst.hessian(res.closure_multipliers)[np.ix_(free, free)]
+        b = Blocks(j[:, :nt], j[:, nt:], h[:nt, :nt], h[:nt, nt:], h[nt:, :nt], h[nt:, nt:], vm.K_theta, end)
+        return stiffness_with_closures(b, ci[:, :nt], ci[:, nt:], tuple(self.task), method)
+
+    # ----------------------------------------------------------------- checks
+    @one_blas_thread
+    def verify(self, res: MechanismResult, *, deflection=None, method: str = "eq28", rtol: float | None = None,
+               stiffness: bool = True):
+        """Re-check the equilibrium ``res`` independently (recomputed with Pinocchio from its
+        configuration, not through this solver's evaluators; :mod:`vjm_pin.solver.mechanism_checks`):
+
+        1. eq. (5) with the multipliers recomputed from scratch (minimum-norm least squares on
+           the stacked closure + held-row Jacobian), each row against its own scale, and the
+           fresh multipliers and their generalised forces against the result's;
+        2. the closure residuals and the held task rows (against ``deflection`` when given:
+           the deflection that was prescribed, 6, 3 or ``len(task)`` numbers, m and rad);
+        3. both stability verdicts from a central-difference Hessian of the Lagrangian on the
+           null space of the stacked constraint Jacobian, and their eigenvalues against the
+           result's;
+        4. with ``stiffness``, K_C (``method``) along its softest task direction against central
+           differences of re-solved equilibria (relative error ≤ ``rtol``, default
+           :data:`~vjm_pin.solver.mechanism_checks.VERIFY_RTOL`).
+
+        Returns:
+            :class:`~vjm_pin.solver.mechanism_checks.MechanismCheck` (frozen; ``ok`` when all pass).
+
+        Raises:
+            NoEquilibrium: ``res`` did not converge.
+        """
+        from vjm_pin.solver.mechanism_checks import VERIFY_RTOL, check_mechanism
+
+        return check_mechanism(
+            self, res, deflection=deflection, method=method, rtol=VERIFY_RTOL if rtol is None else float(rtol),
+            stiffness=stiffness,
+        )
 
 
-__all__ = ["MechanismResult", "MechanismSolver"]
+__all__ = ["Linearization", "MechanismResult", "MechanismSolver"]

@@ -5,10 +5,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import lapack as _lapack
 
 from vjm_pin.exceptions import SingularStiffness
 from vjm_pin.solver.blocks import Blocks
+from vjm_pin.solver.lapack import lapack as _lapack  # scipy's LAPACK without importing scipy.linalg
 from vjm_pin.solver.stability import RANK_TOL, SCIPY_LAPACK_MAX_N
 
 METHODS = ("eq30", "eq32", "eq33")
@@ -264,3 +264,122 @@ def stiffness_from_blocks(b: Blocks, task=(0, 1, 2, 3, 4, 5), method: str = "eq3
     if method == "eq33":
         return stiffness_eq33(b, task)
     raise ValueError(f"unknown stiffness method '{method}'; choose one of {METHODS}")
+
+
+# --------------------------------------------------------------------------- mechanisms with loop closures
+#: Stiffness formulas of a mechanism with loop closures (:func:`stiffness_with_closures`).
+CLOSURE_METHODS = ("eq28", "eq30", "eq32", "eq33")
+
+
+def border_closures(b: Blocks, c_theta: np.ndarray, c_q: np.ndarray) -> Blocks:
+    """The blocks of eq. (28) with closure rows bordered like passive-joint rows.
+
+    The linearised closures ``C_θ δθ + C_q δq = 0`` and their multipliers ``δμ`` (the change of
+    the closure reactions) enter eq. (28) exactly as further passive coordinates with zero
+    stiffness: ``δq' = (δq, δμ)`` with::
+
+        J_q' = [J_q, 0],   H_qq' = [[H_qq, C_qᵀ], [C_q, 0]],   H_qθ' = [[H_qθ], [C_θ]],   H_θq' = [H_θq, C_θᵀ]
+
+    (the H blocks are those of the Lagrangian: eq. 16 contractions of the end wrench, of the
+    dead loads and of the closure multipliers). Eq. (30), (32) and (33) applied to these blocks
+    give the mechanism's K_C (the first ``nq`` rows of ``K_q`` are the passive sensitivities,
+    the rest ``∂μ/∂t``). With no closure rows the blocks are ``b`` itself.
+
+    Args:
+        b: The blocks at the equilibrium (J task rows; H blocks of the Lagrangian).
+        c_theta: (k, nθ) independent closure rows, spring columns (m/rad, rad/rad, ...).
+        c_q: (k, nq) the same rows, passive columns.
+    """
+    c_theta = np.asarray(c_theta, float).reshape(-1, b.J_theta.shape[1])
+    c_q = np.asarray(c_q, float).reshape(c_theta.shape[0], b.J_q.shape[1])
+    k = c_theta.shape[0]
+    if k == 0:
+        return b
+    m, nq = b.J_q.shape
+    h_qq = np.zeros((nq + k, nq + k))
+    h_qq[:nq, :nq] = b.H_qq
+    h_qq[:nq, nq:] = c_q.T
+    h_qq[nq:, :nq] = c_q
+    return Blocks(
+        J_theta=b.J_theta,
+        J_q=np.hstack([b.J_q, np.zeros((m, k))]),
+        H_tt=b.H_tt,
+        H_tq=np.hstack([b.H_tq, c_theta.T]),
+        H_qt=np.vstack([b.H_qt, c_theta]),
+        H_qq=h_qq,
+        K_theta=b.K_theta,
+        state=b.state,
+    )
+
+
+def eq28_closures_matrix(b: Blocks, c_theta: np.ndarray, c_q: np.ndarray) -> np.ndarray:
+    """The bordered matrix of eq. (28) with the closure rows, unknowns ``(δF, δμ, δθ, δq)``::
+
+        [[0, 0, J_θ, J_q], [0, 0, C_θ, C_q], [J_θᵀ, C_θᵀ, H_θθ − K_θ, H_θq], [J_qᵀ, C_qᵀ, H_qθ, H_qq]]
+    """
+    m, nt = b.J_theta.shape
+    k, nq = c_theta.shape[0], b.J_q.shape[1]
+    e = m + k
+    n = e + nt + nq
+    a = np.zeros((n, n))
+    a[:m, e : e + nt] = b.J_theta
+    a[:m, e + nt :] = b.J_q
+    a[m:e, e : e + nt] = c_theta
+    a[m:e, e + nt :] = c_q
+    a[e:, :e] = a[:e, e:].T
+    a[e : e + nt, e : e + nt] = b.H_tt - b.K_theta
+    a[e : e + nt, e + nt :] = b.H_tq
+    a[e + nt :, e : e + nt] = b.H_qt
+    a[e + nt :, e + nt :] = b.H_qq
+    return a
+
+
+def stiffness_with_closures(
+    b: Blocks, c_theta: np.ndarray, c_q: np.ndarray, task=(0, 1, 2, 3, 4, 5), method: str = "eq28"
+) -> StiffnessResult:
+    """K_C, K_q, K_θ of a mechanism with (independent) closure rows ``C = [C_θ C_q]``.
+
+    ``method``: ``"eq28"`` solves the bordered system of :func:`eq28_closures_matrix` for the
+    right-hand side ``[δt; 0; 0; 0]``; ``"eq30"``, ``"eq32"``, ``"eq33"`` apply the paper's
+    formulas to :func:`border_closures` (the closure multipliers as zero-stiffness passive
+    coordinates), so eq. (32) eliminates ``δθ`` with ``k_θ^F = (K_θ − H_θθ)⁻¹`` and eq. (33)
+    needs ``J_θ k_θ^F J_θᵀ`` invertible, as for a serial chain. All four agree where they apply.
+    The returned ``method`` is ``"<method>-closures"``.
+
+    Raises:
+        SingularStiffness: the matrix the method inverts is singular (a critical point, a task
+            direction the mechanism cannot move in, or a block eq. 32/33 needs).
+        ValueError: an unknown method.
+    """
+    if method not in CLOSURE_METHODS:
+        raise ValueError(f"unknown stiffness method '{method}'; choose one of {CLOSURE_METHODS}")
+    c_theta = np.asarray(c_theta, float).reshape(-1, b.J_theta.shape[1])
+    c_q = np.asarray(c_q, float).reshape(c_theta.shape[0], b.J_q.shape[1])
+    nq = b.J_q.shape[1]
+    if method != "eq28":
+        try:
+            r = stiffness_from_blocks(border_closures(b, c_theta, c_q), task, method)
+        except SingularStiffness as exc:
+            if "(eq. 31)" in str(exc) or "(eq. 33)" in str(exc):
+                raise  # K_θ − H_θθ or J_θ k_θ^F J_θᵀ: the same blocks as for a serial chain
+            raise SingularStiffness(
+                f"the matrix of eq. ({method[2:]}) with the closure rows is singular: the equilibrium is at a "
+                "critical point (bifurcation/buckling) of the loaded mechanism, or the task frame cannot move "
+                "in some task direction",
+                exc.eigenvalues,
+            ) from None
+        return StiffnessResult(r.stiffness, r.dq_dt[:nq], r.dtheta_dt, f"{method}-closures", r.task)
+    a = eq28_closures_matrix(b, c_theta, c_q)
+    m = b.J_theta.shape[0]
+    e = m + c_theta.shape[0]
+    if _rcond(a) < SINGULAR_RCOND:  # judged on the equilibrated matrix (units mix)
+        raise SingularStiffness(
+            "the bordered matrix of eq. (28) with the closure rows is singular: the equilibrium is at a "
+            "critical point (bifurcation/buckling) of the loaded mechanism",
+            np.linalg.svd(a, compute_uv=False),
+        )
+    rhs = np.zeros((a.shape[0], m))
+    rhs[:m] = np.eye(m)
+    x = np.linalg.solve(a, rhs)
+    nt = b.J_theta.shape[1]
+    return _embed(task, x[:m], x[e + nt :], x[e : e + nt], "eq28-closures")
