@@ -21,10 +21,10 @@ import time
 import numpy as np
 import pytest
 
-from vjm_pin.cli import main
-from vjm_pin.exceptions import MapInterrupted, SchedulerError
 from vjm_pin.analysis.map_backends import check_scheduler
 from vjm_pin.analysis.maps import run_map, sample_poses
+from vjm_pin.cli import main
+from vjm_pin.exceptions import MapInterrupted, SchedulerError
 from vjm_pin.model.robots import build_robot
 
 N_BIG = 100_000  # minutes of work: an interrupt, not the end, stops these runs
@@ -321,7 +321,11 @@ BAD = [
     ),
     (["paper-c-s", "--grid", "link1_vjm_tx=0:0.1:3"], "virtual spring joint"),
     (["paper-c-s", "--samples", "3"], "no actuated joint"),
-    (["paper-c-s", "--grid", "qa1=0:1:3", "--gravity"], "passive joints"),
+    (["four-bar", "--grid", "elbow=0:1:3"], "passive joint of a closed mechanism"),
+    (["four-bar", "--samples", "3", "--wrench", "0", "10", "0"], "outside the task"),
+    (["ur5", "--samples", "3", "--load", "nope", "0", "0", "-1"], "unknown frame 'nope'"),
+    (["ur5", "--samples", "3", "--load", "tool0", "0", "-1"], "load 'tool0 0 -1'"),
+    (["ur5", "--samples", "3", "--load", "tool0", "0", "x", "-1"], "tool0"),
     (["ur5", "--samples", "3", "--workers", "0"], "--workers must be positive"),
     (["ur5", "--samples", "3", "--workers", "-2"], "--workers must be positive"),
     (["ur5", "--samples", "3", "--backend", "mpi"], "invalid choice: 'mpi'"),

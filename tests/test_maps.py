@@ -7,8 +7,6 @@ import numpy as np
 import pytest
 
 from vjm_pin import EquilibriumSolver, load_vjm, loaded_stiffness
-from vjm_pin.cli import main
-from vjm_pin.exceptions import InputError, JointNotFound
 from vjm_pin.analysis.maps import (
     evaluate_pose,
     grid_poses,
@@ -18,6 +16,8 @@ from vjm_pin.analysis.maps import (
     run_map,
     sample_poses,
 )
+from vjm_pin.cli import main
+from vjm_pin.exceptions import InputError, JointNotFound
 from vjm_pin.model.paper_models import paper_model_urdf
 from vjm_pin.model.robots import build_robot
 
@@ -108,7 +108,9 @@ def test_csv_npz_and_plot(tmp_path, small):
     _, _, res = small
     res.save(tmp_path / "m.csv")
     res.save(tmp_path / "m.npz")
-    res.plot(tmp_path / "m.png")
+    from vjm_pin.viz.plots import save_map_plot
+
+    save_map_plot(res, tmp_path / "m.png")
     with open(tmp_path / "m.csv") as fh:
         rows = list(csv.DictReader(fh))
     assert len(rows) == len(res.status)

@@ -6,8 +6,26 @@ the backend, the number of workers or the chunking: ``serial``, ``local`` (a pro
 on all cores) and ``dask`` (``dask.distributed``; a local cluster when no scheduler
 address is given) agree bit for bit (``tests/test_maps.py``).
 
-Indices at each pose (the end wrench ``F`` of eq. 11 and, optionally, link loads of
-:mod:`vjm_pin.loads`):
+Models of every kind. A serial chain is evaluated at the joint values of the pose
+(:class:`~vjm_pin.solver.EquilibriumSolver`); an open chain of springs and motors loaded at its
+end only (ur5 with actuator or link springs) has all poses of a chunk solved in lockstep
+(:mod:`vjm_pin.analysis.batched`: the same Newton iteration on stacked arrays, one Pinocchio
+Jacobian per pose per iteration; poses it cannot vouch for go to the per-pose path, and each
+pose's numbers do not depend on its chunk, so the backends still agree bit for bit). A mechanism with loop closures (a four-bar, the
+Orthoglide) is mapped over its **actuated** joints: at each pose it is first re-assembled
+(:mod:`vjm_pin.analysis.assembly`: passive joints found by continuation from the reference so
+that every closure holds, springs at rest), then loaded and solved by
+:class:`~vjm_pin.solver.mechanism.MechanismSolver`, the solver of ``analyze`` (its equilibrium,
+eq. 23 verdict and the bordered eq. 28 K_C). Dead loads anywhere (``loads``, ``--load``,
+``--payload``) and link weights take the same mechanism path, as in ``analyze``.
+
+Output. :func:`run_map` returns the whole map (:class:`MapResult`); :func:`stream_map` writes
+the rows to a CSV file as chunks finish (:class:`CsvStream`, pose order, renamed into place at
+the end) and keeps only a :class:`MapSummary`, for maps of millions of poses. Plots:
+:func:`vjm_pin.viz.plots.save_map_plot`.
+
+Indices at each pose (the end wrench ``F`` of eq. 11 and, optionally, dead loads at frames
+and link weights):
 
 ``deflection``        (6,) end displacement (m, rad), world axes.
 ``k_along``           translational stiffness along the force direction ``f̂`` (N/m):
@@ -17,8 +35,11 @@ Indices at each pose (the end wrench ``F`` of eq. 11 and, optionally, link loads
                       ``1 / λ_max(sym C_tt)`` (:func:`vjm_pin.analysis.indices.weakest_translation`;
                       0 where K_C is singular along a translation).
 ``stable``            verdict of eq. (23) at the loaded equilibrium.
-``status``            ``ok``, ``singular`` (no finite stiffness there, e.g. a singular pose)
-                      or ``no-equilibrium`` (the load exceeds what the pose can carry).
+``status``            ``ok``, ``singular`` (no finite stiffness there, e.g. a singular pose),
+                      ``no-equilibrium`` (the load exceeds what the pose can carry) or
+                      ``no-assembly`` (a closed mechanism that cannot be assembled at these
+                      actuator positions from its reference: out of the workspace, or beyond
+                      a singular configuration; every index NaN, ``p0`` too).
 """
 
 from __future__ import annotations
@@ -27,6 +48,7 @@ import csv
 import itertools
 import math
 import os
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -35,7 +57,7 @@ import numpy as np
 from vjm_pin.exceptions import InputError
 from vjm_pin.model.format import VjmModel
 
-STATUS = ("ok", "singular", "no-equilibrium")
+STATUS = ("ok", "singular", "no-equilibrium", "no-assembly")
 BACKENDS = ("serial", "local", "dask")
 #: Most poses one map may hold (about 100 bytes each in memory and 300 in a CSV file).
 MAX_POSES = 10_000_000
@@ -46,9 +68,9 @@ MAX_WORKERS_PER_CORE = 16
 # ----------------------------------------------------------------------------- poses
 def mapped_joints(vm: VjmModel) -> list[str]:
     """The joints a map varies: the actuated joints with an actuator spring (the robot's
-    motors), in configuration order."""
+    motors; for a closed mechanism its actuators), in configuration order."""
     act = {g.joints[0] for g in vm.springs if g.link is None and len(g.joints) == 1}
-    return [n for n in vm.joint_names if n in act]
+    return [n for n in vm.joint_names if n in act and vm.roles[n] == "actuated"]
 
 
 def joint_limits(vm: VjmModel, names) -> np.ndarray:
@@ -186,12 +208,14 @@ _MODEL_CACHE: dict = {}
 #: pose of a map shares the model (``with_positions`` changes only the reference), so a
 #: worker creates its Pinocchio workspace once, not once per pose (issue 14).
 _KIN_CACHE: dict = {}
+# (every cache of this module is per thread: a Dask worker with several threads evaluates poses
+# concurrently, and a pin.Data must not be shared between them)
 
 
 def _shared_kinematics(model, frame_id: int):
     from vjm_pin.kinematics.chain import Kinematics
 
-    key = (id(model), int(frame_id))
+    key = (id(model), int(frame_id), threading.get_ident())  # a pin.Data is not thread-safe
     hit = _KIN_CACHE.get(key)
     if hit is None or hit[0] is not model:
         if len(_KIN_CACHE) >= 8:
@@ -213,60 +237,210 @@ def _model_from_text(text: str) -> VjmModel:
     return vm
 
 
-def evaluate_pose(vm: VjmModel, names, values, wrench, gravity=None, method: str = "eq30") -> dict:
+def evaluate_pose(
+    vm: VjmModel, names, values, wrench, gravity=None, method: str = "eq30", loads=()
+) -> dict:
     """Deflection and stiffness indices of ``vm`` at the pose ``names = values`` under the
-    end ``wrench`` (6,) and, if ``gravity`` (3,) is given, the link weights. Never raises
-    for a pose that cannot be analysed: ``status`` says why."""
+    end ``wrench`` (6,), the dead ``loads`` (:class:`~vjm_pin.kinematics.dead_loads.Load`)
+    and, if ``gravity`` (3,) is given, the link weights. Never raises for a pose that cannot
+    be analysed: ``status`` says why. Mechanisms (:func:`uses_mechanism_solver`) are
+    re-assembled at the pose and solved by :class:`~vjm_pin.solver.mechanism.MechanismSolver`."""
     from vjm_pin.solver.threads import single_blas_thread
 
     with single_blas_thread():  # one BLAS thread inside (vjm_pin.solver.threads)
+        if uses_mechanism_solver(vm, gravity, loads):
+            return _evaluate_mechanism(vm, names, values, wrench, gravity, tuple(loads))
         return _evaluate_pose(vm, names, values, wrench, gravity, method)
 
 
-def _evaluate_pose(vm: VjmModel, names, values, wrench, gravity, method) -> dict:
-    from vjm_pin.exceptions import NoEquilibrium, SingularStiffness
-    from vjm_pin.solver import EquilibriumSolver, loaded_stiffness
+def uses_mechanism_solver(vm: VjmModel, gravity=None, loads=()) -> bool:
+    """Whether a map of ``vm`` solves its poses with :class:`~vjm_pin.solver.mechanism.MechanismSolver`
+    (as ``analyze``): loop closures, dead loads at frames (a payload too) or link weights. An open
+    chain loaded at its end only takes the serial solvers."""
+    return bool(vm.closures) or bool(len(loads)) or gravity is not None
 
-    v = vm.with_positions(dict(zip(names, (float(x) for x in values))))
-    kin = _shared_kinematics(v.model, v.frame_id)
-    p0, _ = kin.placement(v.reference)
-    row = {
-        "p0": p0,
+
+def _empty_row(p0=None) -> dict:
+    return {
+        "p0": np.full(3, np.nan) if p0 is None else p0,
         "deflection": np.full(6, np.nan),
         "k_along": np.nan,
         "k_min": np.nan,
         "stable": False,
         "status": "ok",
     }
+
+
+#: One :class:`~vjm_pin.analysis.assembly.Assembler` per model and joint set in this process
+#: (its lattice memo does not change any number: see :mod:`vjm_pin.analysis.assembly`).
+_ASSEMBLER_CACHE: dict = {}
+
+
+def _shared_assembler(vm: VjmModel, names):
+    from vjm_pin.analysis.assembly import Assembler
+
+    key = (id(vm), tuple(names), threading.get_ident())
+    hit = _ASSEMBLER_CACHE.get(key)
+    if hit is None or hit[0] is not vm:
+        if len(_ASSEMBLER_CACHE) >= 4:
+            _ASSEMBLER_CACHE.clear()
+        hit = (vm, Assembler(vm, names))  # the model is kept: its id stays unique
+        _ASSEMBLER_CACHE[key] = hit
+    return hit[1]
+
+
+#: One :class:`~vjm_pin.solver.mechanism.MechanismSolver` (its ``pin.Data``) per model, loads and
+#: gravity in this process; each pose gets a copy at its reference
+#: (:meth:`~vjm_pin.solver.mechanism.MechanismSolver.at_reference`), not a new Pinocchio workspace.
+_SOLVER_CACHE: dict = {}
+
+
+def _base_solver(vm: VjmModel, loads=(), gravity=None):
+    """This process's MechanismSolver of ``vm`` (at the file's reference) for these loads."""
+    from vjm_pin.solver.mechanism import MechanismSolver
+
+    key = (
+        id(vm),
+        threading.get_ident(),
+        tuple((ld.frame, tuple(ld.wrench.tolist())) for ld in loads),
+        None if gravity is None else tuple(np.asarray(gravity, float).tolist()),
+    )
+    hit = _SOLVER_CACHE.get(key)
+    if hit is None or hit[0] is not vm:
+        if len(_SOLVER_CACHE) >= 4:
+            _SOLVER_CACHE.clear()
+        hit = (vm, MechanismSolver(vm, loads, None if gravity is None else np.asarray(gravity, float)))
+        _SOLVER_CACHE[key] = hit
+    return hit[1]
+
+
+def assembled_model(vm: VjmModel, names, values) -> VjmModel | None:
+    """``vm`` with the joints ``names`` at ``values`` and, for a closed mechanism, its passive
+    joints re-assembled (:class:`~vjm_pin.analysis.assembly.Assembler`): a model whose reference
+    configuration satisfies every closure with the springs at rest. None when the mechanism
+    cannot be assembled there."""
+    positions = {n: float(x) for n, x in zip(names, values)}
+    if vm.closures:
+        asm = _shared_assembler(vm, names).assemble([positions[n] for n in names])
+        if not asm.ok:
+            return None
+        positions.update({n: float(asm.x[i]) for n, i in zip(vm.q_names, vm.q_idx)})
+    return vm.with_positions(positions)
+
+
+def _evaluate_mechanism(vm: VjmModel, names, values, wrench, gravity, loads) -> dict:
+    """One pose of a mechanism: re-assembled, then loaded (:class:`MechanismSolver`, every task
+    component loaded by ``wrench``, the dead ``loads`` and link weights)."""
+    from vjm_pin.exceptions import NoEquilibrium, SingularStiffness
+
+    v = assembled_model(vm, names, values)
+    if v is None:
+        row = _empty_row()
+        row["status"] = "no-assembly"
+        return row
+    solver = _base_solver(vm, loads, gravity).at_reference(v)
+    row = _empty_row(solver.p0.copy())
     w = np.asarray(wrench, float)
     try:
-        if v.n_q == 0:  # springs and motors only: Newton on eq. (5') (vjm_pin.loads)
-            from vjm_pin.loads import LinkLoads, solve_loaded
-
-            loads = None if gravity is None else LinkLoads(np.asarray(gravity, float))
-            eq = solve_loaded(v, w, loads, method=method, kin=kin)
-            if eq.stiffness is None:
-                raise SingularStiffness("singular loaded stiffness")
-            k, defl, stable = eq.stiffness.stiffness, eq.deflection, eq.stable
-        elif gravity is not None and np.any(np.asarray(gravity) != 0):
-            from vjm_pin.loads import LoadError
-
-            raise LoadError(
-                f"model '{v.name}' has passive joints: gravity maps need spring and motor joints only"
-            )
-        else:
-            res = EquilibriumSolver(v, _kin=kin).solve_wrench(w)
-            k, defl, stable = loaded_stiffness(v, res, method, kin=kin).stiffness, res.deflection, res.stable
+        res = solver.solve(wrench=w, x0=v.reference)
+        k = solver.stiffness(res).stiffness
     except SingularStiffness:
         row["status"] = "singular"
         return row
     except NoEquilibrium:
         row["status"] = "no-equilibrium"
         return row
-    row["deflection"] = defl
-    row["stable"] = bool(stable)
+    row["deflection"] = res.deflection
+    row["stable"] = bool(res.stable)
     row["k_along"], row["k_min"] = stiffness_indices(k, w, v.task)
     return row
+
+
+def _evaluate_pose(vm: VjmModel, names, values, wrench, gravity, method) -> dict:
+    """One pose of an open chain loaded at its end only: :meth:`EquilibriumSolver.solve_wrench`
+    (every task component loaded, from the unloaded reference) and the loaded K_C (eq. 28/30)
+    there. The reference of :mod:`vjm_pin.analysis.batched`, and the path of chains with passive
+    joints and of the poses the batched path hands back."""
+    from vjm_pin.exceptions import NoEquilibrium, SingularStiffness
+    from vjm_pin.solver import loaded_stiffness
+
+    v = _pose_setter(vm).model_at(names, values)
+    solver = _serial_solver(vm, v)
+    row = _empty_row(solver.p0.copy())
+    w = np.asarray(wrench, float)
+    try:
+        res = solver.solve_wrench(w)
+        k = loaded_stiffness(v, res, method, kin=solver.kin).stiffness
+    except SingularStiffness:
+        row["status"] = "singular"
+        return row
+    except NoEquilibrium:
+        row["status"] = "no-equilibrium"
+        return row
+    row["deflection"] = res.deflection
+    row["stable"] = bool(res.stable)
+    row["k_along"], row["k_min"] = stiffness_indices(k, w, v.task)
+    return row
+
+
+class _PoseSetter:
+    """:meth:`VjmModel.with_positions` for the many poses of one map: the joint indices, roles
+    and spring groups of the varied joints are looked up once per model, not once per pose
+    (``VjmModel.joint_names`` builds a list of the Pinocchio names at every call)."""
+
+    def __init__(self, vm: VjmModel):
+        self.vm = vm
+        names = vm.joint_names
+        self.index = {n: i for i, n in enumerate(names)}
+        theta = {int(i): k for k, i in enumerate(vm.theta_idx)}
+        self.theta_pos = {n: theta.get(i) for n, i in self.index.items() if vm.roles[n] == "actuated"}
+        self.group = {g.joints[0]: k for k, g in enumerate(vm.springs) if len(g.joints) == 1}
+
+    def arrays_at(self, names, values) -> tuple[np.ndarray, np.ndarray]:
+        """(reference, θ₀) of the model with ``names`` at ``values`` (no checks: the map checked
+        the names, and values come from a finite (N, n) array)."""
+        vm = self.vm
+        ref = vm.reference.copy()
+        theta0 = vm.theta0.copy()
+        for n, x in zip(names, values):
+            ref[self.index[n]] = x
+            k = self.theta_pos.get(n)
+            if k is not None:
+                theta0[k] = x
+        return ref, theta0
+
+    def model_at(self, names, values) -> VjmModel:
+        """The same model as ``vm.with_positions(dict(zip(names, values)))``."""
+        from dataclasses import replace
+
+        ref, theta0 = self.arrays_at(names, [float(x) for x in values])
+        springs = list(self.vm.springs)
+        for n, x in zip(names, values):
+            g = self.group.get(n)
+            if g is not None and n in self.theta_pos:
+                springs[g] = replace(springs[g], rest=np.array([float(x)]))
+        return replace(self.vm, reference=ref, theta0=theta0, springs=tuple(springs))
+
+
+_SETTER_CACHE: dict = {}
+
+
+def _pose_setter(vm: VjmModel) -> _PoseSetter:
+    hit = _SETTER_CACHE.get(id(vm))
+    if hit is None or hit.vm is not vm:
+        if len(_SETTER_CACHE) >= 8:
+            _SETTER_CACHE.clear()
+        hit = _SETTER_CACHE[id(vm)] = _PoseSetter(vm)  # holds vm: its id stays unique
+    return hit
+
+
+def _serial_solver(vm: VjmModel, v: VjmModel):
+    """An :class:`~vjm_pin.solver.EquilibriumSolver` of the pose model ``v`` (``vm`` moved by
+    :class:`_PoseSetter`) on this thread's shared :class:`~vjm_pin.kinematics.chain.Kinematics`
+    (one ``pin.Data`` per worker, none per pose)."""
+    from vjm_pin.solver import EquilibriumSolver
+
+    return EquilibriumSolver(v, _kin=_shared_kinematics(vm.model, vm.frame_id))
 
 
 def stiffness_indices(k6: np.ndarray, wrench: np.ndarray, task) -> tuple[float, float]:
@@ -291,15 +465,28 @@ def stiffness_indices(k6: np.ndarray, wrench: np.ndarray, task) -> tuple[float, 
     return k_along, weakest_translation(kt, t).stiffness
 
 
-def _chunk_worker(text, names, wrench, gravity, method, chunk):
+#: Private switch: False evaluates every pose by the per-pose path (the reference that
+#: ``tests/test_map_batched.py`` compares the batched path with).
+_batching = True
+
+
+def _chunk_worker(text, names, wrench, gravity, method, loads, chunk):
     """Evaluate a chunk of poses (runs in a worker process)."""
+    from vjm_pin.analysis.batched import batch_applicable, shared_chain
     from vjm_pin.exceptions import VjmError
     from vjm_pin.solver.threads import single_blas_thread
 
     vm = _model_from_text(text)
     try:
         with single_blas_thread():  # once per chunk, not per pose
-            return [evaluate_pose(vm, names, row, wrench, gravity, method) for row in chunk]
+            if _batching and batch_applicable(vm, gravity, loads):
+                # all poses of the chunk in lockstep; the few handed back take the per-pose path
+                rows = shared_chain(vm).solve(names, chunk, wrench)
+                return [
+                    r if r is not None else evaluate_pose(vm, names, row, wrench, gravity, method, loads)
+                    for r, row in zip(rows, chunk)
+                ]
+            return [evaluate_pose(vm, names, row, wrench, gravity, method, loads) for row in chunk]
     except VjmError as e:  # subclasses with extra constructor arguments do not unpickle
         raise VjmError(str(e)) from None
 
@@ -318,6 +505,7 @@ class MapResult:
             stiffness, the end free to rotate (N/m; see the module docstring).
         stable: (N,) eq. (23) verdict. status: (N,) one of :data:`STATUS`.
         wrench: (6,) end wrench (N, N·m). gravity: (3,) m/s² (zeros: none).
+        loads: Dead loads at frames (:class:`~vjm_pin.kinematics.dead_loads.Load`).
     """
 
     model: str
@@ -332,6 +520,7 @@ class MapResult:
     status: np.ndarray
     wrench: np.ndarray
     gravity: np.ndarray
+    loads: tuple = ()
 
     @property
     def ok(self) -> np.ndarray:
@@ -384,6 +573,8 @@ class MapResult:
                 status=self.status,
                 wrench=self.wrench,
                 gravity=self.gravity,
+                load_frames=np.array([ld.frame for ld in self.loads], dtype=str),
+                load_wrenches=np.array([ld.wrench for ld in self.loads], float).reshape(-1, 6),
             )
 
     def save(self, path) -> None:
@@ -395,51 +586,6 @@ class MapResult:
             self.to_npz(p)
         else:
             raise InputError(f"output file must end in .csv or .npz, got '{p.name}'")
-
-    def plot(self, path) -> None:
-        """Scatter of the unloaded end positions (top and side views) coloured by the
-        deflection (mm); failed poses as grey crosses. PNG/PDF/SVG by suffix; written
-        atomically."""
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        from vjm_pin.outputs import atomic_output
-
-        ok = self.ok
-        d = np.linalg.norm(self.deflection[:, :3], axis=1) * 1e3
-        fig, axes = plt.subplots(1, 2, figsize=(11, 4.8), constrained_layout=True)
-        try:
-            sc = None
-            for ax, (i, j, lab) in zip(
-                axes, ((0, 1, ("x (m)", "y (m)")), (0, 2, ("x (m)", "z (m)")))
-            ):
-                if ok.any():
-                    sc = ax.scatter(self.p0[ok, i], self.p0[ok, j], c=d[ok], s=10, cmap="viridis")
-                if (~ok).any():
-                    ax.scatter(
-                        self.p0[~ok, i],
-                        self.p0[~ok, j],
-                        marker="x",
-                        c="0.6",
-                        s=12,
-                        label="no result",
-                    )
-                    ax.legend(loc="best")
-                ax.set_xlabel(lab[0])
-                ax.set_ylabel(lab[1])
-                ax.set_aspect("equal", adjustable="datalim")
-            if sc is not None:
-                fig.colorbar(sc, ax=axes, label="deflection (mm)")
-            w = self.wrench
-            fig.suptitle(
-                f"{self.model}: end '{self.frame}', wrench {np.round(w, 3).tolist()} N, N·m"
-            )
-            with atomic_output(path) as tmp:
-                fig.savefig(tmp, dpi=110)
-        finally:
-            plt.close(fig)
 
 
 def _csv_value(v):
@@ -458,6 +604,7 @@ def run_map(
     wrench,
     *,
     gravity=None,
+    loads=(),
     method: str = "eq30",
     backend: str = "local",
     workers: int | None = None,
@@ -468,22 +615,292 @@ def run_map(
     """Evaluate the map over ``poses`` (N, len(names)).
 
     Args:
+        names: The joints the poses set; for a closed mechanism actuated joints only (its
+            passive joints are re-assembled at each pose).
+        wrench: (6,) or (3,) dead wrench on the task frame (N, N·m; world axes).
+        gravity: (3,) gravity (m/s²) for the link weights, or None.
+        loads: Dead loads at frames (:class:`~vjm_pin.kinematics.dead_loads.Load`, world axes).
         backend: ``"serial"``, ``"local"`` (process pool, ``workers`` processes, default all
             cores) or ``"dask"`` (``dask.distributed`` client on ``scheduler``, an address
             ``tcp://HOST:PORT``; a local cluster of ``workers`` processes when None).
-        chunk: Poses per task (default: about 4 tasks per worker, at most 50 poses).
+        chunk: Poses per task (default: about 4 tasks per worker, at most 50 poses, or
+            :data:`BATCH_CHUNK` when the chunks are solved in lockstep,
+            :mod:`vjm_pin.analysis.batched`).
         progress: Called with the number of poses done after each chunk.
 
     Raises:
-        InputError: bad poses, wrench, backend, workers or chunk. SchedulerError (an
+        InputError: bad poses, wrench (a mechanism: components outside the task), loads,
+            backend, workers or chunk. FrameNotFound: a load at an unknown frame. RoleError:
+            a spring joint in ``names``, or a passive one of a closed mechanism. SchedulerError (an
             InputError): no Dask scheduler at ``scheduler``. MapInterrupted: Ctrl-C; it carries the
             poses finished so far (:mod:`vjm_pin.analysis.map_backends` stops the workers first).
     """
-    from vjm_pin.exceptions import MapInterrupted, RoleError
+    from vjm_pin.exceptions import MapInterrupted
+
+    names, poses, w, g, loads = _check_problem(vm, names, poses, wrench, gravity, loads)
+    n_poses = poses.shape[0]
+    out = _Columns(n_poses)
+    finished = np.zeros(n_poses, dtype=bool)
+
+    def consume(start, rows):
+        out.fill(start, rows)
+        finished[start : start + len(rows)] = True  # only now: a chunk cut short is not counted
+
+    try:
+        _run_chunks(vm, names, poses, w, g, loads, method, backend, workers, scheduler, chunk, consume, progress)
+    except KeyboardInterrupt:
+        raise MapInterrupted(out.result(vm, names, poses, w, g, finished, loads), n_poses) from None
+    return out.result(vm, names, poses, w, g, np.ones(n_poses, dtype=bool), loads)
+
+
+#: Default poses per chunk of a map solved in lockstep (:mod:`vjm_pin.analysis.batched`): the
+#: per-iteration numpy work is shared by the chunk, so chunks are larger than the per-pose 50.
+BATCH_CHUNK = 400
+
+
+def _run_chunks(vm, names, poses, w, g, loads, method, backend, workers, scheduler, chunk, consume, progress):
+    """Evaluate the checked problem chunk by chunk; ``consume(start, rows)`` for each chunk in
+    the calling thread (completion order), ``progress(done)`` after it."""
+    from vjm_pin.analysis.batched import batch_applicable
     from vjm_pin.analysis.map_backends import run_chunks
 
     if backend not in BACKENDS:
         raise InputError(f"unknown backend '{backend}'; choose one of {BACKENDS}")
+    n_poses = poses.shape[0]
+    batched = _batching and batch_applicable(vm, g, loads)
+    workers, chunk = _check_workers(workers, chunk, scheduler, n_poses, BATCH_CHUNK if batched else 50)
+    starts = list(range(0, n_poses, chunk))
+    done = 0
+
+    def report(k, rows):
+        nonlocal done
+        consume(starts[k], rows)
+        done += len(rows)
+        if progress is not None:
+            progress(done)
+
+    run_chunks(
+        _chunk_worker,
+        (vm.urdf, names, w, g, method, loads),
+        [poses[i : i + chunk] for i in starts],
+        report,
+        backend=backend,
+        workers=workers,
+        scheduler=scheduler,
+    )
+
+
+# ----------------------------------------------------------------------------- streaming
+@dataclass(frozen=True)
+class MapSummary:
+    """What :func:`stream_map` keeps of a map written to a CSV file: no per-pose rows, only the
+    four magnitudes the summaries need (about 40 bytes a pose, against about 200 in a
+    :class:`MapResult` and 300 in the file).
+
+    Attributes:
+        model, frame, joints, wrench, gravity, loads: As :class:`MapResult`.
+        path: The CSV file written. n_poses: Poses written (all of them, or those finished
+            before an interrupt). requested: Poses asked for. poses: (n_poses, k) their joint
+            values (the caller's array itself when every pose was written).
+        status: (n,) status codes, index into :data:`STATUS` (uint8). stable: (n,) bool.
+        deflection_norm, rotation_norm, k_along, k_min: (n,) float (m, rad, N/m, N/m).
+    """
+
+    model: str
+    frame: str
+    joints: tuple
+    path: str
+    n_poses: int
+    requested: int
+    poses: np.ndarray
+    status: np.ndarray
+    stable: np.ndarray
+    deflection_norm: np.ndarray
+    rotation_norm: np.ndarray
+    k_along: np.ndarray
+    k_min: np.ndarray
+    wrench: np.ndarray
+    gravity: np.ndarray
+    loads: tuple = ()
+
+    @property
+    def ok(self) -> np.ndarray:
+        return self.status == STATUS.index("ok")
+
+    def status_counts(self) -> dict[str, int]:
+        return {STATUS[int(c)]: int(n) for c, n in zip(*np.unique(self.status, return_counts=True))}
+
+
+class CsvStream:
+    """Writes the rows of a map to a CSV file as its chunks finish, in pose order, without
+    holding the map: a chunk that finishes before an earlier one waits (at most the chunks in
+    flight, :data:`~vjm_pin.analysis.map_backends.IN_FLIGHT` per worker), every other chunk is
+    written and dropped at once. The file is a temporary one next to ``path`` until
+    :meth:`commit` renames it (an interrupted or failed map leaves no half file).
+
+    Attributes:
+        held_max: The most chunks ever waiting (for the tests: it does not grow with N).
+    """
+
+    def __init__(self, path, names, poses: np.ndarray):
+        import tempfile
+
+        self.path = Path(path)
+        self.names = list(names)
+        self.poses = poses
+        fd, tmp = tempfile.mkstemp(prefix=f".{self.path.stem}.", suffix=".csv.part", dir=self.path.parent)
+        self.tmp = Path(tmp)
+        self.fh = os.fdopen(fd, "w", encoding="utf-8", newline="")
+        self.writer = csv.writer(self.fh)
+        self.writer.writerow(_csv_header(self.names))
+        self.next = 0  # first pose not yet written
+        self.pending: dict[int, list] = {}
+        self.held_max = 0
+        n = poses.shape[0]
+        self.written = np.zeros(n, dtype=bool)
+        self.status = np.zeros(n, dtype=np.uint8)
+        self.stable = np.zeros(n, dtype=bool)
+        self.mags = np.full((4, n), np.nan)
+
+    def add(self, start: int, rows) -> None:
+        """Take the rows of the chunk that starts at pose ``start``."""
+        self.pending[start] = rows
+        self.held_max = max(self.held_max, len(self.pending))
+        while self.next in self.pending:
+            rows = self.pending.pop(self.next)
+            self._write(self.next, rows)
+            self.next += len(rows)
+
+    def _write(self, start: int, rows) -> None:
+        d = np.array([r["deflection"] for r in rows], float).reshape(-1, 6)
+        dns = np.linalg.norm(d[:, :3], axis=1)  # as MapResult.columns: the same digits
+        rns = np.linalg.norm(d[:, 3:], axis=1)
+        for i, r, dn, rn in zip(range(start, start + len(rows)), rows, dns, rns):
+            self.writer.writerow(_csv_row(self.poses[i], r, dn, rn))
+            self.written[i] = True
+            self.status[i] = STATUS.index(r["status"])
+            self.stable[i] = bool(r["stable"])
+            self.mags[:, i] = (dn, rn, r["k_along"], r["k_min"])
+
+    def commit(self) -> None:
+        """Write the chunks still waiting (after an interrupt: the finished poses, in pose order,
+        with gaps), close and rename the file over ``path``."""
+        for start in sorted(self.pending):
+            self._write(start, self.pending.pop(start))
+        self.fh.close()
+        try:
+            os.chmod(self.tmp, os.stat(self.path).st_mode & 0o7777)
+        except FileNotFoundError:
+            m = os.umask(0)
+            os.umask(m)
+            os.chmod(self.tmp, 0o666 & ~m)
+        os.replace(self.tmp, self.path)
+
+    def discard(self) -> None:
+        import contextlib
+
+        with contextlib.suppress(OSError):
+            self.fh.close()
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(self.tmp)
+
+
+def stream_map(
+    vm: VjmModel,
+    names,
+    poses: np.ndarray,
+    wrench,
+    path,
+    *,
+    gravity=None,
+    loads=(),
+    method: str = "eq30",
+    backend: str = "local",
+    workers: int | None = None,
+    scheduler: str | None = None,
+    chunk: int | None = None,
+    progress=None,
+) -> MapSummary:
+    """:func:`run_map` written straight to the CSV file ``path`` (:class:`CsvStream`): the same
+    rows as ``run_map(...).to_csv(path)``, in bounded memory for maps of millions of poses.
+
+    On Ctrl-C the finished poses are written (pose order) and :class:`MapInterrupted` carries
+    their :class:`MapSummary`; on any other error no file is left.
+
+    Raises:
+        As :func:`run_map`; InputError: ``path`` does not end in ``.csv``.
+    """
+    from vjm_pin.exceptions import MapInterrupted
+
+    if Path(path).suffix != ".csv":
+        raise InputError(f"a streamed map is written as CSV: the file must end in .csv, got '{Path(path).name}'")
+    names, poses, w, g, loads = _check_problem(vm, names, poses, wrench, gravity, loads)
+    sink = CsvStream(path, names, poses)
+    try:
+        _run_chunks(vm, names, poses, w, g, loads, method, backend, workers, scheduler, chunk, sink.add, progress)
+    except KeyboardInterrupt:
+        if sink.next or sink.pending:
+            sink.commit()  # the finished poses
+        else:
+            sink.discard()  # nothing finished: an existing file stays as it was
+        raise MapInterrupted(_stream_summary(vm, names, sink, w, g, loads), poses.shape[0]) from None
+    except BaseException:
+        sink.discard()
+        raise
+    sink.commit()
+    return _stream_summary(vm, names, sink, w, g, loads)
+
+
+def _stream_summary(vm, names, sink: CsvStream, w, g, loads) -> MapSummary:
+    m = sink.written
+    return MapSummary(
+        model=vm.name,
+        frame=vm.frame,
+        joints=tuple(names),
+        path=str(sink.path),
+        n_poses=int(m.sum()),
+        requested=int(m.size),
+        poses=sink.poses if m.all() else sink.poses[m],
+        status=sink.status[m],
+        stable=sink.stable[m],
+        deflection_norm=sink.mags[0, m],
+        rotation_norm=sink.mags[1, m],
+        k_along=sink.mags[2, m],
+        k_min=sink.mags[3, m],
+        wrench=w,
+        gravity=np.zeros(3) if g is None else g,
+        loads=tuple(loads),
+    )
+
+
+def _csv_header(names) -> list[str]:
+    return [
+        *names,
+        "p0_x_m", "p0_y_m", "p0_z_m",
+        "dx_m", "dy_m", "dz_m", "rx_rad", "ry_rad", "rz_rad",
+        "deflection_m", "rotation_rad", "k_along_N_per_m", "k_min_N_per_m", "stable", "status",
+    ]  # fmt: skip
+
+
+def _csv_row(pose, r, dn, rn) -> list:
+    """One CSV row (the columns of :meth:`MapResult.columns`, the same text as :meth:`MapResult.to_csv`)."""
+    return [
+        *(_csv_value(np.float64(v)) for v in pose),
+        *(_csv_value(np.float64(v)) for v in r["p0"]),
+        *(_csv_value(np.float64(v)) for v in r["deflection"]),
+        _csv_value(np.float64(dn)),
+        _csv_value(np.float64(rn)),
+        _csv_value(np.float64(r["k_along"])),
+        _csv_value(np.float64(r["k_min"])),
+        _csv_value(np.bool_(r["stable"])),
+        r["status"],
+    ]
+
+
+def _check_problem(vm: VjmModel, names, poses, wrench, gravity, loads):
+    """(names, poses (N, n), wrench (6,), gravity (3,) or None, loads) checked (:func:`run_map`)."""
+    from vjm_pin.exceptions import RoleError
+
     names = list(names)
     poses = np.asarray(poses, dtype=float)
     if poses.ndim != 2 or poses.shape[1] != len(names) or poses.shape[0] < 1:
@@ -501,17 +918,30 @@ def run_map(
         vm.joint_index(n)
         if vm.roles[n] == "spring":
             raise RoleError(f"joint '{n}' is a virtual spring joint; a map cannot set its position")
-    if gravity is not None and vm.n_q:
-        from vjm_pin.loads import LoadError
+        if vm.closures and vm.roles[n] == "passive":
+            raise RoleError(
+                f"joint '{n}' is a passive joint of a closed mechanism: it is found by re-assembling the "
+                "mechanism at each pose; vary its actuated joints"
+            )
+    loads = _check_loads(vm, loads)
+    g = None if gravity is None else np.asarray(gravity, float).reshape(-1)
+    if g is not None and (g.shape != (3,) or not np.all(np.isfinite(g))):
+        raise InputError(f"gravity must be 3 finite numbers (m/s²), got {np.asarray(gravity).tolist()}")
+    if uses_mechanism_solver(vm, g, loads):
+        outside = [c for i, c in enumerate(("x", "y", "z", "rx", "ry", "rz")) if w[i] and i not in vm.task]
+        if outside:
+            raise InputError(
+                f"wrench has components {outside} outside the task ({' '.join(vm.task_names)}) of model "
+                f"'{vm.name}'; give them as a dead load at a frame"
+            )
+    return names, poses, w, g, loads
 
-        raise LoadError(
-            f"model '{vm.name}' has passive joints {vm.q_names}: gravity maps need spring and motor joints only"
-        )
+
+def _check_workers(workers, chunk, scheduler, n_poses: int, max_chunk: int = 50) -> tuple[int, int]:
+    """(workers, chunk) checked, with their defaults (:func:`run_map`)."""
     for what, v in (("workers", workers), ("chunk", chunk)):
         if v is not None and (isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1):
             raise InputError(f"{what} must be a positive integer, got {v!r}")
-    g = None if gravity is None else np.asarray(gravity, float)
-    n_poses = poses.shape[0]
     cores = os.cpu_count() or 1
     if workers is not None and workers > MAX_WORKERS_PER_CORE * cores and not scheduler:
         raise InputError(
@@ -520,36 +950,29 @@ def run_map(
         )
     workers = int(workers or cores)
     if chunk is None:
-        chunk = max(1, min(50, math.ceil(n_poses / (4 * workers))))
-    starts = list(range(0, n_poses, chunk))
-    out = _Columns(n_poses)
-    finished = np.zeros(len(starts), dtype=bool)
-    done = 0
+        chunk = max(1, min(max_chunk, math.ceil(n_poses / (4 * workers))))
+    return workers, int(chunk)
 
-    def report(k, rows):
-        nonlocal done
-        out.fill(starts[k], rows)
-        finished[k] = True  # only now: a chunk cut short by Ctrl-C is not counted
-        done += len(rows)
-        if progress is not None:
-            progress(done)
 
-    try:
-        run_chunks(
-            _chunk_worker,
-            (vm.urdf, names, w, g, method),
-            [poses[i : i + chunk] for i in starts],
-            report,
-            backend=backend,
-            workers=workers,
-            scheduler=scheduler,
-        )
-    except KeyboardInterrupt:
-        mask = np.zeros(n_poses, dtype=bool)
-        for k in np.flatnonzero(finished):
-            mask[starts[k] : starts[k] + chunk] = True
-        raise MapInterrupted(out.result(vm, names, poses, w, g, mask), n_poses) from None
-    return out.result(vm, names, poses, w, g, np.ones(n_poses, dtype=bool))
+def _check_loads(vm: VjmModel, loads) -> tuple:
+    """``loads`` as a tuple of :class:`~vjm_pin.kinematics.dead_loads.Load` at frames of ``vm``.
+
+    Raises:
+        InputError: not Load objects. FrameNotFound: an unknown frame (lists the frames).
+    """
+    from vjm_pin.kinematics.dead_loads import DeadLoads, Load
+
+    if loads is None:
+        return ()
+    if isinstance(loads, Load):
+        loads = (loads,)
+    loads = tuple(loads)
+    bad = [type(ld).__name__ for ld in loads if not isinstance(ld, Load)]
+    if bad:
+        raise InputError(f"loads must be Load objects (frame, wrench), got {bad[0]}")
+    if loads:
+        DeadLoads(vm, loads, None)  # FrameNotFound before any work
+    return loads
 
 
 class _Columns:
@@ -572,7 +995,7 @@ class _Columns:
             self.stable[i] = r["stable"]
             self.status[i] = r["status"]
 
-    def result(self, vm, names, poses, w, g, mask) -> MapResult:
+    def result(self, vm, names, poses, w, g, mask, loads=()) -> MapResult:
         return MapResult(
             model=vm.name,
             frame=vm.frame,
@@ -586,4 +1009,5 @@ class _Columns:
             status=self.status[mask],
             wrench=w,
             gravity=np.zeros(3) if g is None else g,
+            loads=tuple(loads),
         )
