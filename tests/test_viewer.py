@@ -233,6 +233,70 @@ def test_animation_tracks(chain):
         assert (tail - tip) @ (-forces[k]) > 0
 
 
+def test_animation_loads_closures_ellipsoid_and_unstable_parts(chain):
+    """Dead-load arrows at their frames (one length scale for all arrows), closure markers
+    following their frames, the ellipsoid scaled per frame, and on an unstable frame with a
+    mode only the bodies that the mode moves are red."""
+    model, geom = chain
+    frames, stable, forces = bending_motion(model)
+    n = len(frames)
+    mode = np.zeros((model.nq, 1))
+    mode[2, 0] = 1.0  # only j3 turns: its link (j3 -> tool) moves, the others stay
+    rot = np.linalg.qr(np.random.default_rng(1).standard_normal((3, 3)))[0]
+    rot[:, 2] *= np.sign(np.linalg.det(rot))
+    ell = [None] + [(np.array([0.1, 0.05, 0.02]) * (1 + 0.1 * k), rot) for k in range(1, n)]
+    anim = Animation(
+        model,
+        geom,
+        frames,
+        stable=stable,
+        forces=forces,
+        frame_name="tool",
+        loads=[("l2", [np.array([0.0, 0.0, -25.0 * (k + 1)]) for k in range(n)])],
+        closures=[("c", "tool", "l2")],
+        modes=[None if s else mode for s in stable],
+        ellipsoid=ell,
+        ellipsoid_label="test ellipsoid",
+    )
+    tracks = _animation_tracks(anim)
+    data = model.createData()
+    for k in (1, n - 1):
+        pin.framesForwardKinematics(model, data, frames[k])
+        l2 = data.oMf[model.getFrameId("l2")].translation
+        tool = data.oMf[model.getFrameId("tool")].translation
+        # the load arrow sits on the force line through its frame; half the end force's length
+        tail = np.array(tracks["/meshcat/vjm/load0"][".position"][k]["value"])
+        assert np.linalg.norm(np.cross(tail - l2, [0, 0, 1])) < 1e-9
+        head = 0.2 * anim.arrow_length
+
+        length = {  # shaft + (scaled) head
+            node: tracks[f"/meshcat/vjm/{node}/shaft"][".scale"][k]["value"][1]
+            + tracks[f"/meshcat/vjm/{node}/head"][".scale"][k]["value"][1] * head
+            for node in ("load0", "force")
+        }
+        assert length["load0"] == pytest.approx(0.5 * length["force"], rel=1e-9)
+        # closure markers: frame_b and frame_a
+        np.testing.assert_allclose(tracks["/meshcat/vjm/closure0/b"][".position"][k]["value"], l2, atol=1e-12)
+        np.testing.assert_allclose(tracks["/meshcat/vjm/closure0/a"][".position"][k]["value"], tool, atol=1e-12)
+        # the ellipsoid: centred at the end frame, scaled by its semi-axes
+        np.testing.assert_allclose(tracks["/meshcat/vjm/ellipsoid"][".position"][k]["value"], tool, atol=1e-12)
+        np.testing.assert_allclose(tracks["/meshcat/vjm/ellipsoid/shape"][".scale"][k]["value"], ell[k][0], rtol=1e-12)
+    visible = [key["value"] for key in tracks["/meshcat/vjm/ellipsoid"][".visible"]]
+    assert visible == [False] + [True] * (n - 1)
+    # unstable frames: the link moved by the mode is red, the links before it stay green
+    anim_red = [0.9, 0.1, 0.1]
+    moved = tracks["/meshcat/vjm/robot/link:j3->tool_joint/<object>"][".material.color"]
+    still = tracks.get("/meshcat/vjm/robot/link:j1->j2/<object>", {}).get(".material.color")
+    assert next(key["value"] for key in moved if key["time"] >= BEND_FRAME) == pytest.approx(anim_red)
+    assert still is None  # never changes colour: green on every frame
+    setup = anim.page_setup()
+    texts = [e["text"] for e in setup["legend"]]
+    assert "test ellipsoid" in texts and any("loop closure" in t for t in texts)
+    assert any("take part in its unstable mode" in t for t in texts)
+    load = next(a for a in setup["anchors"] if a["cls"] == "load")
+    assert load["text"][3] == "l2: 100 N"
+
+
 def test_animation_send_matches_commands(chain):
     model, geom = chain
     frames, stable, _ = bending_motion(model)
@@ -706,3 +770,80 @@ def test_all_branches_needs_curve(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith("vjm-pin: error:") and "--all-branches" in err and err.count("\n") == 1
     assert not out.exists()
+
+
+# ----------------------------------------------------------------------------- browser: mechanisms
+@pytest.fixture(scope="module")
+def mechanism_shots(tmp_path_factory):
+    """One Chromium run: a closed loop's curve page around its critical frame with the
+    continued (unstable) branch (tests/roller_column.py), the portal frame under vertical
+    dead loads across its sway buckling load, and the Orthoglide at Q3 across its critical
+    force along −u (``view orthoglide-q3 --wrench -2300 -2300 -2300``)."""
+    browser = chromium()
+    if browser is None:
+        pytest.skip("no chromium binary on PATH (apt-get install chromium)")
+    from vjm_pin.analysis.curve import trace_curve
+    from vjm_pin.cli import main
+    from vjm_pin.cli.view import curve_page
+    from vjm_pin.model.registry import resolve_model
+
+    from .roller_column import roller_column
+
+    tmp = tmp_path_factory.mktemp("mechanism-shots")
+    vm = resolve_model(str(roller_column(tmp)))
+    roller = tmp / "roller.html"
+    cp = curve_page(vm, trace_curve(vm, [-1.0, 0, 0], 0.3, 12), path=roller, n_frames=61,
+                    all_branches=True)
+    k, last = cp.critical_frame, cp.frames - 1
+    portal, ortho = tmp / "portal.html", tmp / "q3.html"
+    loads = ["--load", "top_left", "0", "0", "-300", "--load", "top_right", "0", "0", "-300"]
+    assert main(["view", "portal-frame", *loads, "--html", str(portal)]) == 0
+    assert main(["view", "orthoglide-q3", "--wrench", "-2300", "-2300", "-2300", "--html", str(ortho)]) == 0
+    shots = {("roller", i): (roller, i) for i in (k - 6, k - 3, k, k + 3, last)}
+    # 21 frames at load factors 0, 0.05, ...: the portal turns unstable between 13 and 14
+    # (P = 195 and 210 N, 2k/h = 200 N), the Orthoglide between 17 and 18 (3.39 and 3.58 kN)
+    shots.update({("portal", i): (portal, i) for i in (13, 14)})
+    shots.update({("ortho", i): (ortho, i) for i in (17, 18, 20)})
+    return screenshot_grid(browser, shots, tmp, cell=CELL), k, last
+
+
+def test_browser_closed_loop_curve_buckling(mechanism_shots):
+    img, k, last = mechanism_shots
+    r = {i: a for (m, i), a in img.items() if m == "roller"}
+    for i, a in r.items():
+        _assert_in_frame(a, f"roller column frame {i}")
+        assert _marker_masks(a)[1].sum() > 150, f"frame {i}: no critical marker"
+    green = {i: _colour_masks(a)[0] for i, a in r.items()}
+    red = {i: _colour_masks(a)[1] for i, a in r.items()}
+    # the followed column bends past the critical frame; before it, it only shortens
+    across = (green[k] ^ green[k + 3]).sum()
+    before = (green[k - 6] ^ green[k - 3]).sum()
+    assert across > 3 * before + 150, (before, across)
+    # the straight branch it leaves is drawn in red past the critical point only
+    assert red[last].sum() > 400 and red[k + 3].sum() > 200, (red[k + 3].sum(), red[last].sum())
+    assert red[k - 3].sum() < 50 and red[k].sum() < 50, (red[k - 3].sum(), red[k].sum())
+
+
+def test_browser_portal_frame_sway_parts_in_red(mechanism_shots):
+    img, _, _ = mechanism_shots
+    below, above = img[("portal", 13)], img[("portal", 14)]
+    for name, a in (("below", below), ("above", above)):
+        _assert_in_frame(a, f"portal frame {name} the buckling load")
+        assert _marker_masks(a)[0].sum() > 100, f"{name}: no load arrows"
+    g0, r0 = _colour_masks(below)
+    g1, r1 = _colour_masks(above)
+    assert r0.sum() < 50 and g0.sum() > 3000, (g0.sum(), r0.sum())
+    # past 2k/h the columns and the beam (they sway) turn red; the ground link stays green
+    assert r1.sum() > 3000 and 200 < g1.sum() < 0.5 * g0.sum(), (g1.sum(), r1.sum())
+
+
+def test_browser_orthoglide_buckling_leg_in_red(mechanism_shots):
+    img, _, _ = mechanism_shots
+    o = {i: a for (m, i), a in img.items() if m == "ortho"}
+    for i, a in o.items():
+        _assert_in_frame(a, f"Orthoglide Q3 frame {i}", min_span=0.5)
+    g17, r17 = _colour_masks(o[17])
+    assert r17.sum() < 50 and g17.sum() > 1000, (g17.sum(), r17.sum())
+    for i in (18, 20):  # one leg red (the one that buckles), the two others green
+        g, r = _colour_masks(o[i])
+        assert r.sum() > 300 and g.sum() > 0.5 * g17.sum(), (i, g.sum(), r.sum())

@@ -49,52 +49,7 @@ def plot_curve(
 
         _, ax = plt.subplots(figsize=(6.4, 4.4))
     dunit, funit = _units(curve.direction)
-    # the followed branch, with each critical point inserted where it was located (the
-    # step grid alone would draw a chord across the transition)
-    s_l, f_l, st_l = [], [], []
-    crit = sorted(curve.critical, key=lambda c: c.index)
-    for i, p in enumerate(curve.points):
-        for c in crit:
-            if c.index == i:
-                s_l += [c.deflection, np.nan, c.deflection]
-                f_l += [c.force, np.nan, c.force]
-                st_l += [True, True, True]
-        s_l.append(p.deflection)
-        f_l.append(p.force)
-        st_l.append(p.stable)
-    s = np.array(s_l) / deflection_unit
-    f = np.array(f_l) / force_unit
-    stable = np.array(st_l)
-    line = ax.plot(
-        np.where(stable, s, np.nan),
-        np.where(stable, f, np.nan),
-        "-",
-        color=color,
-        lw=1.8,
-        label=(label or "followed branch") + " (stable)",
-    )[0]
-    color = line.get_color()
-    if not stable.all():
-        ax.plot(
-            np.where(~stable, s, np.nan),
-            np.where(~stable, f, np.nan),
-            ":",
-            color=color,
-            lw=1.5,
-            label=(label or "followed branch") + " (unstable)",
-        )
-    for i, br in enumerate(curve.branches):
-        bs = np.array([p.deflection for p in br]) / deflection_unit
-        bf = np.array([p.force for p in br]) / force_unit
-        ax.plot(
-            bs,
-            bf,
-            "--",
-            color=color,
-            lw=1.2,
-            alpha=0.8,
-            label=f"{label or ''} unstable branch".strip() if i == 0 else None,
-        )
+    color = _draw_followed(ax, curve, deflection_unit, force_unit, color, label)
     for name, x, y in analytic:
         ax.plot(
             np.asarray(x) / deflection_unit,
@@ -106,24 +61,14 @@ def plot_curve(
             label=name,
         )
     if mark_critical:
-        for c in curve.critical:
-            ax.plot(
-                [c.deflection / deflection_unit],
-                [c.force / force_unit],
-                "*",
-                color=color,
-                ms=13,
-                mec="k",
-                mew=0.6,
-            )
-            ax.annotate(
-                f"{c.force / force_unit:.4g}" + ("" if force_label is not None else f" {funit}"),
-                (c.deflection / deflection_unit, c.force / force_unit),
-                textcoords="offset points",
-                xytext=(6, -12),
-                fontsize=8,
-                color=color,
-            )
+        _mark_critical(
+            ax,
+            curve,
+            deflection_unit,
+            force_unit,
+            color,
+            "" if force_label is not None else f" {funit}",
+        )
     ax.set_xlabel(
         deflection_label
         if deflection_label is not None
@@ -138,6 +83,80 @@ def plot_curve(
     if inset:
         _pre_buckling_inset(ax, curve, deflection_unit, force_unit, color)
     return ax
+
+
+def _draw_followed(ax, curve, deflection_unit: float, force_unit: float, color, label):
+    """The followed branch (stable solid, unstable dotted) with each critical point inserted
+    where it was located (the step grid alone would draw a chord across the transition), and
+    the other branches dashed. Returns the colour used."""
+    s_l, f_l, st_l = [], [], []
+    crit = sorted(curve.critical, key=lambda c: c.index)
+    for i, p in enumerate(curve.points):
+        for c in crit:
+            if c.index == i:
+                s_l += [c.deflection, np.nan, c.deflection]
+                f_l += [c.force, np.nan, c.force]
+                st_l += [True, True, True]
+        s_l.append(p.deflection)
+        f_l.append(p.force)
+        st_l.append(p.stable)
+    s = np.array(s_l) / deflection_unit
+    f = np.array(f_l) / force_unit
+    stable = np.array(st_l)
+    name = label or "followed branch"
+    line = ax.plot(
+        np.where(stable, s, np.nan),
+        np.where(stable, f, np.nan),
+        "-",
+        color=color,
+        lw=1.8,
+        label=name + " (stable)",
+    )[0]
+    color = line.get_color()
+    if not stable.all():
+        ax.plot(
+            np.where(~stable, s, np.nan),
+            np.where(~stable, f, np.nan),
+            ":",
+            color=color,
+            lw=1.5,
+            label=name + " (unstable)",
+        )
+    for i, br in enumerate(curve.branches):
+        bs = np.array([p.deflection for p in br]) / deflection_unit
+        bf = np.array([p.force for p in br]) / force_unit
+        ax.plot(
+            bs,
+            bf,
+            "--",
+            color=color,
+            lw=1.2,
+            alpha=0.8,
+            label=f"{label or ''} unstable branch".strip() if i == 0 else None,
+        )
+    return color
+
+
+def _mark_critical(ax, curve, deflection_unit: float, force_unit: float, color, unit: str) -> None:
+    """A star at each critical point, annotated with its force (and ``unit``)."""
+    for c in curve.critical:
+        ax.plot(
+            [c.deflection / deflection_unit],
+            [c.force / force_unit],
+            "*",
+            color=color,
+            ms=13,
+            mec="k",
+            mew=0.6,
+        )
+        ax.annotate(
+            f"{c.force / force_unit:.4g}{unit}",
+            (c.deflection / deflection_unit, c.force / force_unit),
+            textcoords="offset points",
+            xytext=(6, -12),
+            fontsize=8,
+            color=color,
+        )
 
 
 #: The pre-buckling inset is drawn when the first critical point lies within this fraction

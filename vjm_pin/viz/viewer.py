@@ -22,6 +22,18 @@ Scene layout (meshcat paths, all under ``/meshcat/vjm``)
     starts it just beyond the load point (a pull); ``"head"`` ends it just short of the load
     point (a push seen from outside); ``"auto"`` takes ``"tail"`` unless that arrow would run
     along or through a link on some frame. Its value in N is a label in the page.
+``load<i>``
+    One arrow per dead load (``loads``: frame, per-frame force), laid out like ``force`` and
+    at the same length scale (``arrow_length`` for the largest force of all arrows); its
+    label is ``"<frame>: <|F|> N"``.
+``closure<i>/a``, ``closure<i>/b``
+    Loop-closure markers (``closures``): translucent unlit violet cubes, a bit larger than
+    the joint spheres, at ``frame_b`` and (turned 45°, smaller) at ``frame_a``; they coincide
+    where the loop is closed and follow the frames.
+``ellipsoid``, ``ellipsoid/shape``
+    A translucent blue ellipsoid at the end frame (``ellipsoid``: per frame its semi-axes in
+    m as drawn and their axes, or None to hide it): the node carries the position and the
+    principal axes, its unit sphere ``shape`` the per-frame scale.
 ``critical``
     A ring (unlit magenta, facing the camera, larger than whatever sits at the end point) around
     the end-frame position of the critical frame, and a pin above it carrying the label
@@ -33,13 +45,23 @@ three.js animations can drive any property reachable from the animated object, a
 meshcat viewer (``Animator.load``) binds each clip to the object at its path. Each robot
 mesh is therefore given a ``ColorKeyframeTrack`` named ``.material.color``, bound to the
 mesh node ``robot/<geometry>/<object>``: the material colour is animated like a position.
-Colours are keyed at every stability change with a second key 1e-3 frame earlier that holds
+Colours are keyed at every change with a second key 1e-3 frame earlier that holds
 the previous colour, so the switch is sharp instead of a blend between two frames. Every
 track also has keys at the first and the last frame so that all clips have the same duration
 (clips loop independently in three.js). Joint markers made by :func:`chain_geometry` (names
 starting with ``"joint:"``) keep their role colour; every other geometry is recoloured.
 (Toggling the ``visible`` flag of two robot copies would also work, with twice the
 geometry; the force arrow uses such a ``visible`` boolean track to hide zero forces.)
+
+Which parts are red on an unstable frame: all of the robot by default. With ``modes`` (per
+frame, the configuration directions in which the equilibrium is unstable, e.g. the
+eigenvectors of eq. 23 on the constraint null space of a mechanism), only the bodies that
+the unstable mode moves: each geometry object's displacement along the mode (largest over
+its bounding-box corners, to first order, largest over the modes) is compared with the
+largest one, and the objects that move at least :data:`MODE_FRACTION` of it are red, the
+others green (they do not take part in the instability: the ground, a stable leg). With
+``unstable_joints`` (per frame, joint indices) the caller names the red bodies itself (e.g.
+the legs of a parallel robot that carry the mode); geometry attached to those joints is red.
 
 Animation time control in the exported page
 --------------------------------------------
@@ -87,7 +109,21 @@ Live server
 to each browser that connects, root first. An animation stored at the root would arrive
 before the meshes it binds to, so the animation command is filed under
 ``/meshcat/vjm/animation`` instead. That node is replayed after the robot. The served page
-is meshcat's own, so it has no overlay and no ``#frame=`` control.
+is meshcat's own, so it has no overlay and no ``#frame=`` control; the numbers of the current
+frame (its label: force, deflection, verdict) are drawn in the scene instead
+(``scene_labels``): above the robot, facing the initial camera, one textured square per line
+(the viewer's ``_text`` canvas texture, black on a translucent white strip), one set per frame
+switched by discrete ``visible`` tracks (frame k's text from k − ½ to k + ½). Being part of
+the 3-D scene, the text turns away when the camera is orbited; meshcat's control panel cannot
+show changing values (its "Animations" folder only holds the player's own controls).
+
+Meshes and other outputs
+------------------------
+:func:`load_visuals` loads a URDF's own meshes (``--package-dir``, ``ROS_PACKAGE_PATH``; a
+missing mesh is warned about and primitives are drawn, which ``legend_notes`` states);
+``points`` adds a coloured point cloud (a stiffness map, :mod:`vjm_pin.viz.map_cloud`);
+:meth:`Animation.frame_bodies` gives other renderers the drawn bodies of a frame (the
+paper-style figure of :mod:`vjm_pin.viz.figures`).
 """
 
 from __future__ import annotations
@@ -97,6 +133,7 @@ import contextlib
 import html
 import io
 import json
+import logging
 import math
 import os
 import warnings
@@ -121,10 +158,12 @@ __all__ = [
     "UNSTABLE_COLOR",
     "Animation",
     "Branch",
+    "MeshVisuals",
     "auto_camera_direction",
     "chain_geometry",
     "default_scale",
     "export_html",
+    "load_visuals",
     "magnify",
     "serve",
 ]
@@ -160,6 +199,16 @@ LINK_PREFIX = "link:"
 _TOL = 1e-9
 _CAMERA_FOV = 40.0  # (deg) vertical field of view of the camera
 _EPS_FRAME = 1e-3  # (frames) offset of the key that holds the old colour before a change
+_MODE_STEP = 1e-6  # (m, rad) step along an unstable mode to measure which bodies it moves
+MODE_FRACTION = 0.25
+"""On an unstable frame with ``modes``, a body is drawn red when it moves at least this fraction
+of the largest body displacement in the unstable mode (first order), green otherwise."""
+SCENE_LABEL_LINES = 4
+"""Lines of scene text per frame at most (``Animation(scene_labels=True)``)."""
+CLOSURE_COLOR = (0.45, 0.15, 0.95, 1.0)
+"""Loop-closure markers (violet cubes at frame_a and frame_b, unlit)."""
+ELLIPSOID_COLOR = (0.2, 0.45, 1.0, 0.35)
+"""The compliance ellipsoid (translucent blue)."""
 
 
 # ============================================================================ chain geometry
@@ -170,6 +219,7 @@ def chain_geometry(
     link_radius: float | None = None,
     link_shape: str = "cylinder",
     default_style: str = "actuated",
+    extra_frames: Sequence[str] = (),
 ) -> pin.GeometryModel:
     """Primitive visual geometry for a generated chain.
 
@@ -191,11 +241,17 @@ def chain_geometry(
         colours: :data:`STYLE_COLORS`). Joints not named get ``default_style``.
     link_radius
         Radius (half width for boxes) of the link segments, m. Default: 6 % of the median
-        segment length. Joint spheres have 1.7 times this radius.
+        segment length, at least 0.6 % of the robot's size (the diagonal of the bounding box
+        of its joint origins in the neutral pose). Joint spheres have 1.7 times this radius.
     link_shape
         ``"cylinder"`` or ``"box"``.
     default_style
         Style of joints missing from ``styles``.
+    extra_frames
+        Frames that also get a segment from the origin of their parent joint (the world
+        origin for frames on the ground) when they are not already an end of one: the
+        points a mechanism is closed at (``<vjm:closure>`` frames), a task frame off the
+        links, loaded frames. This draws the ground link of a loop and rigid offsets.
 
     Returns
     -------
@@ -213,6 +269,34 @@ def chain_geometry(
     """
     import coal
 
+    _check_chain_options(model, styles, default_style, link_shape, extra_frames)
+    segments = _chain_segments(model, extra_frames)
+    if link_radius is None:
+        link_radius = _default_link_radius(model, segments)
+    r_link = max(float(link_radius), 1e-6)
+    r_joint = 1.7 * r_link
+
+    gmodel = pin.GeometryModel()
+    ez = np.array([0.0, 0.0, 1.0])
+    for parent, t, label in segments:
+        length = float(np.linalg.norm(t))
+        rot = pin.Quaternion.FromTwoVectors(ez, t / length).toRotationMatrix()
+        placement = pin.SE3(rot, 0.5 * t)
+        if link_shape == "cylinder":
+            shape = coal.Cylinder(r_link, length)
+        else:
+            shape = coal.Box(2 * r_link, 2 * r_link, length)
+        go = pin.GeometryObject(
+            LINK_PREFIX + label, parent, _joint_frame(model, parent), placement, shape
+        )
+        go.meshColor = np.array(LINK_COLOR)
+        gmodel.addGeometryObject(go)
+    _add_joint_markers(gmodel, model, styles, default_style, r_joint)
+    return gmodel
+
+
+def _check_chain_options(model, styles, default_style, link_shape, extra_frames) -> None:
+    """Validate the options of :func:`chain_geometry` (its Raises section)."""
     names = list(model.names)
     for jn, st in styles.items():
         if jn not in names[1:]:
@@ -223,13 +307,26 @@ def chain_geometry(
         raise RoleError(f"default_style '{default_style}' is not one of {', '.join(STYLE_COLORS)}")
     if link_shape not in ("cylinder", "box"):
         raise RoleError(f"link_shape '{link_shape}' is not 'cylinder' or 'box'")
+    for fn in extra_frames:
+        if not model.existFrame(fn):
+            raise FrameNotFound(fn, [f.name for f in model.frames], "chain_geometry extra_frames")
 
+
+def _joint_frame(model, j: int) -> int:
+    """The JOINT frame of joint ``j`` (0 for the universe)."""
+    if j == 0:
+        return 0
+    return int(model.getFrameId(model.names[j], pin.FrameType.JOINT))
+
+
+def _chain_segments(model, extra_frames) -> list[tuple[int, np.ndarray, str]]:
+    """The link segments of :func:`chain_geometry`: (parent joint, end point in the parent
+    joint frame, label)."""
+    names = list(model.names)
     nj = model.njoints
     children: list[list[int]] = [[] for _ in range(nj)]
     for j in range(1, nj):
         children[model.parents[j]].append(j)
-
-    # --- segments: (parent joint, end point in the parent joint frame, label)
     segments: list[tuple[int, np.ndarray, str]] = []
     for j in range(1, nj):
         t = np.array(model.jointPlacements[j].translation)
@@ -248,37 +345,39 @@ def chain_geometry(
                 continue
             points.append(t)
             segments.append((j, t, f"{names[j]}->{f.name}"))
+    for fn in extra_frames:
+        f = model.frames[model.getFrameId(fn)]
+        j = int(f.parentJoint)
+        t = np.array(f.placement.translation)
+        ends = [seg_t for p_j, seg_t, _ in segments if p_j == j]
+        ends += [np.array(model.jointPlacements[c].translation) for c in children[j]]
+        on = [float(_segment_distances(t[None, :], np.zeros(3), e)[0]) for e in ends]
+        if np.linalg.norm(t) <= _TOL or any(d <= 1e-6 for d in on):
+            continue  # at the joint, or on a segment already drawn
+        segments.append((j, t, f"{names[j]}->{fn}"))
+    return segments
 
-    if link_radius is None:
-        lengths = [float(np.linalg.norm(t)) for _, t, _ in segments]
-        link_radius = 0.06 * float(np.median(lengths)) if lengths else 0.02
-    r_link = max(float(link_radius), 1e-6)
-    r_joint = 1.7 * r_link
 
-    gmodel = pin.GeometryModel()
+def _default_link_radius(model, segments) -> float:
+    """6 % of the median segment length, at least 0.6 % of the robot's size (m)."""
+    lengths = [float(np.linalg.norm(t)) for _, t, _ in segments]
+    link_radius = 0.06 * float(np.median(lengths)) if lengths else 0.02
+    # links cut into many short segments (beams split into sub-links) stay visible: at
+    # least 0.6 % of the size of the robot (bounding box of its joints, neutral pose)
+    data = model.createData()
+    pin.forwardKinematics(model, data, pin.neutral(model))
+    pts = np.array([m.translation for m in data.oMi])
+    return max(link_radius, 0.006 * float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0))))
 
-    def joint_frame(j: int) -> int:
-        if j == 0:
-            return 0
-        return int(model.getFrameId(names[j], pin.FrameType.JOINT))
 
-    ez = np.array([0.0, 0.0, 1.0])
-    for parent, t, label in segments:
-        length = float(np.linalg.norm(t))
-        rot = pin.Quaternion.FromTwoVectors(ez, t / length).toRotationMatrix()
-        placement = pin.SE3(rot, 0.5 * t)
-        if link_shape == "cylinder":
-            shape = coal.Cylinder(r_link, length)
-        else:
-            shape = coal.Box(2 * r_link, 2 * r_link, length)
-        go = pin.GeometryObject(LINK_PREFIX + label, parent, joint_frame(parent), placement, shape)
-        go.meshColor = np.array(LINK_COLOR)
-        gmodel.addGeometryObject(go)
+def _add_joint_markers(gmodel, model, styles, default_style, r_joint) -> None:
+    """One sphere per stack of co-located joints (and a spring halo), :func:`chain_geometry`."""
+    import coal
 
-    # --- joint markers, one per stack of co-located joints
-    stack_of = [-1] * nj
+    names = list(model.names)
+    stack_of = [-1] * model.njoints
     stacks: list[list[int]] = []
-    for j in range(1, nj):
+    for j in range(1, model.njoints):
         p = model.parents[j]
         if p != 0 and np.linalg.norm(model.jointPlacements[j].translation) <= _TOL:
             stack_of[j] = stack_of[p]
@@ -294,7 +393,7 @@ def chain_geometry(
         go = pin.GeometryObject(
             JOINT_MARKER_PREFIX + names[main_joint],
             attach,
-            joint_frame(attach),
+            _joint_frame(model, attach),
             pin.SE3.Identity(),
             coal.Sphere(r_joint),
         )
@@ -304,13 +403,12 @@ def chain_geometry(
             halo = pin.GeometryObject(
                 JOINT_MARKER_PREFIX + names[main_joint] + ":springs",
                 attach,
-                joint_frame(attach),
+                _joint_frame(model, attach),
                 pin.SE3.Identity(),
                 coal.Sphere(1.35 * r_joint),
             )
             halo.meshColor = np.array(STYLE_COLORS["spring"][:3] + (SPRING_HALO_ALPHA,))
             gmodel.addGeometryObject(halo)
-    return gmodel
 
 
 # ============================================================================ meshcat helpers
@@ -558,6 +656,15 @@ def _flat_material(rgba: Sequence[float]):
     return mg.MeshBasicMaterial(color=_rgb_int(rgba))
 
 
+def _closure_material():
+    """Unlit translucent violet: the closure cubes, with the joint inside them visible."""
+    import meshcat.geometry as mg
+
+    return mg.MeshBasicMaterial(
+        color=_rgb_int(CLOSURE_COLOR), opacity=0.6, transparent=True, depthWrite=False
+    )
+
+
 def _css(rgba: Sequence[float]) -> str:
     r, g, b = (round(255 * min(max(float(c), 0.0), 1.0)) for c in rgba[:3])
     a = float(rgba[3]) if len(rgba) > 3 else 1.0
@@ -645,6 +752,34 @@ class Animation:
         magnitude in N when ``forces`` are given.
     legend
         Show the legend (stable / unstable / critical / force / unloaded) in the page.
+    loads
+        Dead loads: ``(frame name, per-frame forces)`` pairs, each force a 3-vector (N,
+        world axes); one arrow each, same length scale as the end force.
+    modes
+        Per frame None or an (nq, k) array of unstable directions: on an unstable frame only
+        the bodies they move are red (module docstring, :data:`MODE_FRACTION`).
+    closures
+        ``(name, frame_a, frame_b)`` of each loop closure: markers at both frames.
+    ellipsoid
+        Per frame None or ``(semi-axes (3,) m as drawn, axes (3, 3) unit columns)``: an
+        ellipsoid centred at the end frame (``frame_name`` required).
+    ellipsoid_label
+        Its legend text (say what it is and its scale).
+    unstable_joints
+        Per frame None or the joint indices whose bodies are red on an unstable frame
+        (overrides ``modes`` on that frame).
+    legend_notes
+        Lines of text added at the end of the legend (e.g. that primitives replace missing
+        meshes, :attr:`MeshVisuals.note`).
+    scene_labels
+        Draw the current frame's label (``frame_labels``, split at ", " into at most
+        :data:`SCENE_LABEL_LINES` lines) as text in the 3-D scene above the robot, facing the
+        camera, switched per frame by ``visible`` tracks: the numbers for meshcat's own page
+        (:func:`serve`), which has no overlay.
+    points
+        A static coloured point cloud (e.g. a stiffness map, :mod:`vjm_pin.viz.map_cloud`):
+        ``{"positions": (N, 3) m, "colors": (N, 3) RGB in 0..1, "size": point size in m,
+        "legend": [(rgba, text), ...]}``; the legend rows are added to the page's legend.
 
     Raises
     ------
@@ -677,8 +812,20 @@ class Animation:
         arrow_style: str = "auto",
         slider: Mapping[str, Any] | None = None,
         legend: bool = True,
+        loads: Sequence[tuple[str, Sequence[np.ndarray]]] | None = None,
+        modes: Sequence[np.ndarray | None] | None = None,
+        closures: Sequence[tuple[str, str, str]] | None = None,
+        ellipsoid: Sequence[tuple[np.ndarray, np.ndarray] | None] | None = None,
+        ellipsoid_label: str | None = None,
+        unstable_joints: Sequence[Sequence[int] | None] | None = None,
+        legend_notes: Sequence[str] = (),
+        points: Mapping[str, Any] | None = None,
+        scene_labels: bool = False,
     ) -> None:
         self.model = model
+        self.legend_notes = [str(t) for t in legend_notes]
+        self.points = self._check_points(points)
+        self.scene_labels = bool(scene_labels)
         self.visual_model = visual_model
         self.frames = [self._check_q(q, f"frames[{k}]") for k, q in enumerate(frames)]
         n = len(self.frames)
@@ -690,33 +837,8 @@ class Animation:
             if len(stable) != n:
                 raise InputError(f"stable has {len(stable)} entries, expected {n} (one per frame)")
         self.stable = stable
-        if forces is not None:
-            fl = []
-            for k, f in enumerate(forces):
-                f = np.asarray(f, dtype=float).ravel()
-                if f.size not in (3, 6) or not np.all(np.isfinite(f)):
-                    raise InputError(
-                        f"forces[{k}] must be a finite 3-vector (N), got shape {f.shape}"
-                    )
-                fl.append(f[:3].copy())
-            if len(fl) != n:
-                raise InputError(f"forces has {len(fl)} entries, expected {n} (one per frame)")
-            forces = fl
-        self.forces = forces
-        if critical_index is not None:
-            ci = int(critical_index)
-            if not 0 <= ci < n:
-                raise InputError(f"critical_index {critical_index} is outside 0..{n - 1}")
-            critical_index = ci
-        self.critical_index = critical_index
-        if (forces is not None or critical_index is not None) and frame_name is None:
-            raise InputError("frame_name is required with forces or critical_index")
-        self.frame_id: int | None = None
-        if frame_name is not None:
-            if not model.existFrame(frame_name):
-                raise FrameNotFound(frame_name, [f.name for f in model.frames], "viewer frame_name")
-            self.frame_id = int(model.getFrameId(frame_name))
-        self.frame_name = frame_name
+        self.forces = forces = self._check_forces(forces, n)
+        self._set_end_frame(critical_index, frame_name)
         if not (math.isfinite(fps) and fps > 0):
             raise InputError(f"fps must be positive, got {fps}")
         self.fps = float(fps)
@@ -738,7 +860,66 @@ class Animation:
         )
         self.loop = bool(loop)
         self.arrow_length = arrow_length
-        self.branches: list[Branch] = []
+        self.branches: list[Branch] = self._check_branches(branches, n)
+        self.critical_label = "critical point" if critical_label is None else str(critical_label)
+        if arrow_style not in ("auto", "tail", "head"):
+            raise InputError(f"arrow_style must be 'auto', 'tail' or 'head', got {arrow_style!r}")
+        self._arrow_style_opt = arrow_style
+        self.slider = self._check_slider(slider, forces, n)
+        self.legend = bool(legend)
+        self._check_extras(loads, modes, closures, ellipsoid, ellipsoid_label)
+        self.unstable_joints = self._check_unstable_joints(unstable_joints, n)
+        self._compute_kinematics()
+
+    def _set_end_frame(self, critical_index, frame_name) -> None:
+        """Validate and set ``critical_index``, ``frame_name`` and ``frame_id`` (after
+        ``frames`` and ``forces``)."""
+        n, model = len(self.frames), self.model
+        if critical_index is not None:
+            ci = int(critical_index)
+            if not 0 <= ci < n:
+                raise InputError(f"critical_index {critical_index} is outside 0..{n - 1}")
+            critical_index = ci
+        self.critical_index = critical_index
+        if (self.forces is not None or critical_index is not None) and frame_name is None:
+            raise InputError("frame_name is required with forces or critical_index")
+        self.frame_id: int | None = None
+        if frame_name is not None:
+            if not model.existFrame(frame_name):
+                raise FrameNotFound(frame_name, [f.name for f in model.frames], "viewer frame_name")
+            self.frame_id = int(model.getFrameId(frame_name))
+        self.frame_name = frame_name
+
+    def _check_unstable_joints(self, unstable_joints, n: int) -> list[frozenset | None] | None:
+        """Validate ``unstable_joints``: ``n`` joint index sets (or None)."""
+        if unstable_joints is None:
+            return None
+        nj = self.model.njoints
+        uj = [None if u is None else frozenset(int(j) for j in u) for u in unstable_joints]
+        if len(uj) != n or any(u is not None and not all(0 <= j < nj for j in u) for u in uj):
+            raise InputError(
+                f"unstable_joints needs {n} entries (joint index sets 0..{nj - 1} or None)"
+            )
+        return uj
+
+    @staticmethod
+    def _check_forces(forces, n: int) -> list[np.ndarray] | None:
+        """Validate ``forces``: ``n`` finite 3-vectors (a 6-vector's linear part), N."""
+        if forces is None:
+            return None
+        fl = []
+        for k, f in enumerate(forces):
+            f = np.asarray(f, dtype=float).ravel()
+            if f.size not in (3, 6) or not np.all(np.isfinite(f)):
+                raise InputError(f"forces[{k}] must be a finite 3-vector (N), got shape {f.shape}")
+            fl.append(f[:3].copy())
+        if len(fl) != n:
+            raise InputError(f"forces has {len(fl)} entries, expected {n} (one per frame)")
+        return fl
+
+    def _check_branches(self, branches, n: int) -> list[Branch]:
+        """Validate ``branches``: ``n`` configurations (or None) and flags each."""
+        out = []
         for bi, br in enumerate(branches or ()):
             bf, bs = list(br.frames), [bool(s) for s in br.stable]
             if len(bf) != n or len(bs) != n:
@@ -749,29 +930,109 @@ class Animation:
                 None if q is None else self._check_q(q, f"branches[{bi}].frames[{k}]")
                 for k, q in enumerate(bf)
             ]
-            self.branches.append(Branch(tuple(bf), tuple(bs), br.name or f"branch {bi + 1}"))
-        self.critical_label = "critical point" if critical_label is None else str(critical_label)
-        if arrow_style not in ("auto", "tail", "head"):
-            raise InputError(f"arrow_style must be 'auto', 'tail' or 'head', got {arrow_style!r}")
-        self._arrow_style_opt = arrow_style
+            out.append(Branch(tuple(bf), tuple(bs), br.name or f"branch {bi + 1}"))
+        return out
+
+    @staticmethod
+    def _check_slider(slider, forces, n: int) -> dict | None:
+        """Validate ``slider`` (default: |F| in N when ``forces`` are given)."""
         if slider is None and forces is not None and n > 1:
             slider = {
                 "name": "|F|",
                 "unit": "N",
                 "values": [float(np.linalg.norm(f)) for f in forces],
             }
-        if slider is not None:
-            vals = [float(v) for v in slider["values"]]
-            if len(vals) != n or not all(math.isfinite(v) for v in vals):
-                raise InputError(f"slider values must be {n} finite numbers (one per frame)")
-            slider = {
-                "name": str(slider.get("name", "")),
-                "unit": str(slider.get("unit", "")),
-                "values": vals,
-            }
-        self.slider = slider
-        self.legend = bool(legend)
-        self._compute_kinematics()
+        if slider is None:
+            return None
+        vals = [float(v) for v in slider["values"]]
+        if len(vals) != n or not all(math.isfinite(v) for v in vals):
+            raise InputError(f"slider values must be {n} finite numbers (one per frame)")
+        return {
+            "name": str(slider.get("name", "")),
+            "unit": str(slider.get("unit", "")),
+            "values": vals,
+        }
+
+    @staticmethod
+    def _check_points(points) -> dict | None:
+        """Validate the point cloud option (see the class docstring)."""
+        if points is None:
+            return None
+        pos = np.asarray(points.get("positions"), dtype=float)
+        col = np.asarray(points.get("colors"), dtype=float)
+        if pos.ndim != 2 or pos.shape[1] != 3 or not len(pos) or not np.all(np.isfinite(pos)):
+            raise InputError("points: positions must be a non-empty (N, 3) array of finite m")
+        if col.shape != pos.shape or not np.all((col >= 0) & (col <= 1)):
+            raise InputError(f"points: colors must be ({len(pos)}, 3) RGB values in 0..1")
+        size = float(points.get("size", 0.01))
+        if not (math.isfinite(size) and size > 0):
+            raise InputError(f"points: size must be a positive length in m, got {size}")
+        legend = [(tuple(float(c) for c in rgba), str(t)) for rgba, t in points.get("legend", ())]
+        return {"positions": pos, "colors": col, "size": size, "legend": legend}
+
+    def _frame_index(self, name: str, what: str) -> int:
+        if not isinstance(name, str) or not self.model.existFrame(name):
+            raise FrameNotFound(str(name), [f.name for f in self.model.frames], what)
+        return int(self.model.getFrameId(name))
+
+    def _check_extras(self, loads, modes, closures, ellipsoid, ellipsoid_label) -> None:
+        """Validate the dead-load arrows, unstable modes, closure markers and ellipsoid."""
+        n, nq = len(self.frames), self.model.nq
+        self.loads: list[tuple[str, int, list[np.ndarray]]] = []
+        for i, item in enumerate(loads or ()):
+            name, fl = item
+            fid = self._frame_index(name, f"loads[{i}] frame")
+            fl = [np.asarray(f, dtype=float).ravel()[:3] for f in fl]
+            if len(fl) != n or any(f.size != 3 or not np.all(np.isfinite(f)) for f in fl):
+                raise InputError(f"loads[{i}] ('{name}') needs {n} finite force 3-vectors (N), one per frame")
+            self.loads.append((str(name), fid, fl))
+        self.modes: list[np.ndarray | None] | None = None
+        if modes is not None:
+            ml = []
+            for k, m in enumerate(modes):
+                if m is None:
+                    ml.append(None)
+                    continue
+                m = np.asarray(m, dtype=float)
+                m = m.reshape(nq, -1) if m.size % nq == 0 and m.size else m
+                if m.ndim != 2 or m.shape[0] != nq or not np.all(np.isfinite(m)):
+                    raise InputError(f"modes[{k}] must be a finite ({nq}, k) array or None")
+                ml.append(m)
+            if len(ml) != n:
+                raise InputError(f"modes has {len(ml)} entries, expected {n} (one per frame)")
+            self.modes = ml
+        self.closures: list[tuple[str, int, int]] = []
+        for i, item in enumerate(closures or ()):
+            cname, fa, fb = item
+            self.closures.append(
+                (str(cname), self._frame_index(fa, f"closure '{cname}' frame_a"),
+                 self._frame_index(fb, f"closure '{cname}' frame_b"))
+            )
+        self.ellipsoid: list[tuple[np.ndarray, np.ndarray] | None] | None = None
+        if ellipsoid is not None:
+            if self.frame_id is None:
+                raise InputError("frame_name is required with ellipsoid")
+            el = []
+            for k, e in enumerate(ellipsoid):
+                if e is None:
+                    el.append(None)
+                    continue
+                a = np.asarray(e[0], dtype=float).ravel()
+                r = np.asarray(e[1], dtype=float)
+                if a.shape != (3,) or r.shape != (3, 3) or not (np.all(np.isfinite(a)) and np.all(np.isfinite(r))):
+                    raise InputError(f"ellipsoid[{k}] must be (semi-axes (3,), axes (3, 3)), finite")
+                if np.any(a < 0):
+                    raise InputError(f"ellipsoid[{k}] has a negative semi-axis: {a.tolist()}")
+                if np.linalg.det(r) < 0:
+                    r = r.copy()
+                    r[:, 2] *= -1.0
+                el.append((a, r))
+            if len(el) != n:
+                raise InputError(f"ellipsoid has {len(el)} entries, expected {n} (one per frame)")
+            self.ellipsoid = el
+        self.ellipsoid_label = (
+            "compliance ellipsoid" if ellipsoid_label is None else str(ellipsoid_label)
+        )
 
     # ------------------------------------------------------------------ inputs & kinematics
     def _check_q(self, q, what: str) -> np.ndarray:
@@ -795,6 +1056,12 @@ class Animation:
                 parts.append("critical")
             out.append(" | ".join(parts))
         return out
+
+    def _frame_positions(self, fids) -> list[np.ndarray]:
+        """Positions (3,) of frames ``fids`` after :meth:`_placements` (m, world)."""
+        return [
+            np.array(pin.updateFramePlacement(self.model, self._data, f).translation) for f in fids
+        ]
 
     def _placements(self, q: np.ndarray):
         """Geometry placements (4×4), joint origins (njoints, 3), end-frame pose (4×4)."""
@@ -823,16 +1090,23 @@ class Animation:
         self._frame_oMg: list[list[np.ndarray]] = []
         self._frame_oMf: list[np.ndarray | None] = []
         self._frame_joints: list[np.ndarray] = []
+        # positions per frame of the dead-load frames and of the closure frames (a, b)
+        extra_fids = [fid for _, fid, _ in self.loads] + [
+            f for _, fa, fb in self.closures for f in (fa, fb)
+        ]
+        self._extra_pos: list[list[np.ndarray]] = []
         pts = []
         for q in self.frames:
             oMg, joints, oMf = self._placements(q)
             self._frame_oMg.append(oMg)
             self._frame_oMf.append(oMf)
             self._frame_joints.append(joints)
+            self._extra_pos.append(self._frame_positions(extra_fids))
             pts.append(joints)
             pts.append(self._box_points(oMg))
             if oMf is not None:
                 pts.append(oMf[None, :3, 3])
+            pts += [p[None, :] for p in self._extra_pos[-1]]
         self._branch_oMg: list[list[list[np.ndarray] | None]] = []
         for br in self.branches:
             rows = []
@@ -853,6 +1127,8 @@ class Animation:
             pts.append(self._box_points(oMg))
             if oMf is not None:
                 pts.append(oMf[None, :3, 3])
+        if self.points is not None:
+            pts.append(self.points["positions"])
         pts_arr = np.vstack(pts)
         lo, hi = pts_arr.min(axis=0), pts_arr.max(axis=0)
         self.scene_size = max(float(np.linalg.norm(hi - lo)), 1e-3)
@@ -864,65 +1140,204 @@ class Animation:
             else np.asarray(self._camera_given, float).ravel()
             / np.linalg.norm(np.asarray(self._camera_given, float))
         )
+        self._geom_stable = self._geometry_stability()
         self._layout_arrow()
         self._layout_marker()
         extra = [a[None, :] for a in self._arrow_ends] + [m[None, :] for m in self._marker_points]
+        if self.ellipsoid is not None:
+            for k, e in enumerate(self.ellipsoid):
+                if e is not None:
+                    c = self._frame_oMf[k][:3, 3]
+                    extra += [(c + s * a * e[1][:, i])[None, :] for i, a in enumerate(e[0]) for s in (-1, 1)]
         pts_arr = np.vstack([pts_arr, *extra]) if extra else pts_arr
         lo, hi = pts_arr.min(axis=0), pts_arr.max(axis=0)
+        self._text_box = None
+        if self.scene_labels:
+            self._text_box = self._layout_text(lo, hi)
+            pts_arr = np.vstack([pts_arr, self._text_box["corners"]])
+            lo, hi = pts_arr.min(axis=0), pts_arr.max(axis=0)
         self.bbox = (lo, hi)
         self._view_points = _thin_points(pts_arr, 0.02 * self.scene_size)
 
+    # ------------------------------------------------------------------ scene text
+    def label_lines(self, k: int) -> list[str]:
+        """The lines of text drawn in the scene at frame ``k`` (``scene_labels``)."""
+        parts = [t.strip() for t in self.frame_labels[int(k)].split(", ") if t.strip()]
+        if len(parts) > SCENE_LABEL_LINES:
+            parts = parts[: SCENE_LABEL_LINES - 1] + [", ".join(parts[SCENE_LABEL_LINES - 1 :])]
+        return parts
+
+    def _layout_text(self, lo: np.ndarray, hi: np.ndarray) -> dict:
+        """Where the scene text goes: above the bounding box ``lo``–``hi`` (m), its plane
+        facing the camera with the text's x axis horizontal."""
+        cam = self.camera_direction / np.linalg.norm(self.camera_direction)
+        x = np.cross(np.array([0.0, 0.0, 1.0]), cam)
+        if np.linalg.norm(x) < 1e-6:  # looking straight down: text along world x
+            x = np.array([1.0, 0.0, 0.0])
+        x /= np.linalg.norm(x)
+        y = np.cross(cam, x)
+        rot = np.column_stack([x, y, cam])
+        width = 0.45 * self.scene_size
+        step = 0.16 * width  # line spacing (the text is a strip across the middle of its square)
+        nl = max(len(self.label_lines(k)) for k in range(len(self.frames)))
+        top = np.array([0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), hi[2]]) + (
+            0.08 * self.scene_size + nl * step
+        ) * np.array([0.0, 0.0, 1.0])
+        centres = [top - (i + 0.5) * step * y for i in range(nl)]
+        half = 0.5 * width * x
+        mid = 0.5 * (centres[0] + centres[-1])
+        corners = np.array([c + s * half + t * 0.6 * step * y for c in (centres[0], centres[-1])
+                            for s in (-1, 1) for t in (-1, 1)])
+        return {"rot": rot, "width": width, "centres": centres, "step": step, "mid": mid,
+                "lines": nl, "corners": corners}
+
+    def _text_commands(self, cmds, node, prop) -> None:
+        """The scene text of ``scene_labels``: per frame and line a square textured with the
+        line (meshcat's ``_text`` canvas texture), visible on its frame only; a translucent
+        white strip behind them."""
+        import meshcat.geometry as mg
+        from meshcat.commands import SetObject, SetProperty, SetTransform
+
+        tb = self._text_box
+        w, n, last = tb["width"], len(self.frames), len(self.frames) - 1
+        back = np.eye(4)
+        back[:3, :3], back[:3, 3] = tb["rot"], tb["mid"] - 0.01 * w * tb["rot"][:, 2]
+        h = tb["lines"] * tb["step"] + 0.4 * tb["step"]
+        cmds.append(SetObject(mg.Box([w, h, 1e-4 * w]),
+                              mg.MeshBasicMaterial(color=0xFFFFFF, opacity=0.75), node("text", "back")))
+        cmds.append(SetTransform(back, node("text", "back")))
+        for k in range(n):
+            for li, line in enumerate(self.label_lines(k)):
+                tex = mg.GenericTexture(
+                    {"type": "_text", "text": line, "font_size": 34, "font_face": "sans-serif"}
+                )
+                mat = mg.MeshBasicMaterial(color=0xFFFFFF, map=tex, transparent=True, side=0)  # front only
+                path = node("text", f"f{k}", f"l{li}")
+                cmds.append(SetObject(mg.Box([w, w, 1e-4 * w]), mat, path))
+                m = np.eye(4)
+                m[:3, :3], m[:3, 3] = tb["rot"], tb["centres"][li]
+                cmds.append(SetTransform(m, path))
+            fnode = node("text", f"f{k}")
+            cmds.append(SetProperty("visible", k == 0, fnode))
+            if n > 1:  # discrete keys: shown from k - 1/2 to k + 1/2 (the nearest frame)
+                keys = {0: k == 0, last: k == last}
+                if k > 0:
+                    keys[k - 0.5] = True
+                if k < last:
+                    keys[k + 0.5] = False
+                for t in sorted(keys):
+                    prop(fnode, t, "visible", "boolean", keys[t])
+
+    # ------------------------------------------------------------------ stability colours
+    def _geometry_stability(self) -> list[list[bool]] | None:
+        """Per frame, per geometry object: the colour flag (True green, False red).
+
+        Without ``modes`` every object takes the frame's verdict. With ``modes``, on an
+        unstable frame the objects that move in the unstable mode are red and the others
+        green: each object's displacement (largest over its bounding-box corners, to first
+        order, largest over the mode's columns) is compared with the largest one; at least
+        :data:`MODE_FRACTION` of it is red (:data:`MODE_FRACTION` module docs).
+        """
+        if self.stable is None:
+            return None
+        ng = len(self.visual_model.geometryObjects)
+        out = []
+        for k, q in enumerate(self.frames):
+            if not self.stable[k] and self.unstable_joints and self.unstable_joints[k] is not None:
+                red = self.unstable_joints[k]
+                out.append([go.parentJoint not in red for go in self.visual_model.geometryObjects])
+                continue
+            if self.stable[k] or self.modes is None or self.modes[k] is None or not self.modes[k].size:
+                out.append([self.stable[k]] * ng)
+                continue
+            base = [box @ m[:3, :3].T + m[:3, 3] for m, box in zip(self._frame_oMg[k], self._local_boxes)]
+            disp = np.zeros(ng)
+            for v in self.modes[k].T:
+                nv = float(np.linalg.norm(v))
+                if nv == 0:
+                    continue
+                oMg, _, _ = self._placements(q + (_MODE_STEP / nv) * v)
+                moved = [box @ m[:3, :3].T + m[:3, 3] for m, box in zip(oMg, self._local_boxes)]
+                disp = np.maximum(
+                    disp, [float(np.linalg.norm(b - a, axis=1).max()) for a, b in zip(base, moved)]
+                )
+            top = float(disp.max()) if ng else 0.0
+            if top <= 0:
+                out.append([False] * ng)
+            else:
+                out.append([bool(d < MODE_FRACTION * top) for d in disp])
+        return out
+
     # ------------------------------------------------------------------ arrow & marker layout
     def _layout_arrow(self) -> None:
-        """Arrow placement per frame: base point, unit direction, length; style chosen so
-        the arrow stays outside the robot (see ``arrow_style``)."""
+        """Arrow placement per frame for the end force and each dead load: base point, unit
+        direction, length (one length scale for all: ``arrow_length`` for the largest
+        magnitude); style chosen per arrow so it stays outside the robot (``arrow_style``)."""
         self._arrow_ends: list[np.ndarray] = []
+        self._arrows: list[dict] = []
         self.arrow_style = None
-        if self.forces is None:
-            return
         n = len(self.frames)
-        mags = [float(np.linalg.norm(f)) for f in self.forces]
-        fmax = max(mags)
+        specs = []
+        if self.forces is not None:
+            pos = [self._frame_oMf[k][:3, 3] for k in range(n)]
+            specs.append(("force", self.frame_id, pos, self.forces, "force", "F = {:.3g} N"))
+        for i, (name, fid, fl) in enumerate(self.loads):
+            pos = [self._extra_pos[k][i] for k in range(n)]
+            specs.append((f"load{i}", fid, pos, fl, "load", name + ": {:.3g} N"))
+        if not specs:
+            return
+        fmax = max(float(np.linalg.norm(f)) for spec in specs for f in spec[3])
         L = float(self.arrow_length)
         self._arrow_gap = 0.025 * self.scene_size
-        dirs, prev = [], np.array([0.0, 0.0, -1.0])
-        for k in range(n):
-            d = self.forces[k] / mags[k] if mags[k] > 0 else prev
-            prev = d
-            dirs.append(d)
-        lengths = [L * m / fmax if fmax > 0 else 0.0 for m in mags]
-        style = self._arrow_style_opt
-        if style == "auto":
-            style = "tail"
-            clear = 0.04 * self.scene_size
+        for node_name, fid, pos, forces, cls, fmt in specs:
+            mags = [float(np.linalg.norm(f)) for f in forces]
+            dirs, prev = [], np.array([0.0, 0.0, -1.0])
             for k in range(n):
-                if lengths[k] <= 0:
-                    continue
-                p = self._frame_oMf[k][:3, 3]
-                along = np.linspace(0.2, 1.0, 9) * (lengths[k] + self._arrow_gap)
-                samples = p + np.outer(along, dirs[k])
-                end = (int(self.model.frames[self.frame_id].parentJoint), p)
-                dist = _distances_to_links(samples, self._frame_joints[k], self.model, end)
-                # through the robot: closer to a link than to the load point, and close
-                if np.any(dist < np.minimum(clear, 0.5 * along)):
-                    style = "head"
-                    break
-        self.arrow_style = style
-        self._arrow_dirs, self._arrow_lengths = dirs, lengths
-        # tail (start) of the drawn arrow, per frame
-        tails = []
-        for k in range(n):
-            p = self._frame_oMf[k][:3, 3]
-            if style == "tail":
-                tails.append(p + self._arrow_gap * dirs[k])
-            else:
-                tails.append(p - (self._arrow_gap + lengths[k]) * dirs[k])
-        self._arrow_tails = tails
-        for k in range(n):
-            if lengths[k] > 0:
-                self._arrow_ends += [tails[k], tails[k] + lengths[k] * dirs[k]]
-        # where the force label sits: on the middle of the arrow (the page lifts it above)
-        self._force_label_points = [t + 0.5 * lengths[k] * dirs[k] for k, t in enumerate(tails)]
+                d = forces[k] / mags[k] if mags[k] > 0 else prev
+                prev = d
+                dirs.append(d)
+            lengths = [L * m / fmax if fmax > 0 else 0.0 for m in mags]
+            style = self._arrow_style_opt
+            parent = int(self.model.frames[fid].parentJoint)
+            if style == "auto":
+                style = "tail"
+                clear = 0.04 * self.scene_size
+                for k in range(n):
+                    if lengths[k] <= 0:
+                        continue
+                    along = np.linspace(0.2, 1.0, 9) * (lengths[k] + self._arrow_gap)
+                    samples = pos[k] + np.outer(along, dirs[k])
+                    dist = _distances_to_links(
+                        samples, self._frame_joints[k], self.model, (parent, pos[k])
+                    )
+                    # through the robot: closer to a link than to the load point, and close
+                    if np.any(dist < np.minimum(clear, 0.5 * along)):
+                        style = "head"
+                        break
+            tails = []  # tail (start) of the drawn arrow, per frame
+            for k in range(n):
+                if style == "tail":
+                    tails.append(pos[k] + self._arrow_gap * dirs[k])
+                else:
+                    tails.append(pos[k] - (self._arrow_gap + lengths[k]) * dirs[k])
+            for k in range(n):
+                if lengths[k] > 0:
+                    self._arrow_ends += [tails[k], tails[k] + lengths[k] * dirs[k]]
+            self._arrows.append(
+                {
+                    "node": node_name,
+                    "cls": cls,
+                    "style": style,
+                    "tails": tails,
+                    "dirs": dirs,
+                    "lengths": lengths,
+                    # where the label sits: on the middle of the arrow (the page lifts it above)
+                    "label_points": [t + 0.5 * lengths[k] * dirs[k] for k, t in enumerate(tails)],
+                    "texts": [fmt.format(m) if m > 0 else "" for m in mags],
+                }
+            )
+        if self.forces is not None:
+            self.arrow_style = self._arrows[0]["style"]
 
     def _layout_marker(self) -> None:
         """The critical marker: a ring around the end point (larger than whatever sits
@@ -945,6 +1360,32 @@ class Animation:
         for ax in (np.array([1.0, 0, 0]), np.array([0, 1.0, 0])):
             self._marker_points += [p + R * ax, p - R * ax]
 
+    def frame_bodies(self, k: int) -> list[tuple[pin.GeometryObject, np.ndarray, bool | None]]:
+        """What frame ``k`` draws, for other renderers (:mod:`vjm_pin.viz.figures`): per
+        geometry object, ``(object, (4, 4) world placement (m), colour flag)`` with the flag
+        True (stable, green), False (red: unstable, or a part of the unstable mode) or None
+        (no stability given, or a joint marker that keeps its colour)."""
+        if not 0 <= int(k) < len(self.frames):
+            raise InputError(f"frame {k} is outside 0..{len(self.frames) - 1}")
+        out = []
+        for gi, go in enumerate(self.visual_model.geometryObjects):
+            flag = None
+            if self._geom_stable is not None and self.recolor(go.name):
+                flag = bool(self._geom_stable[k][gi])
+            out.append((go, self._frame_oMg[k][gi], flag))
+        return out
+
+    def ghost_bodies(self) -> list[tuple[pin.GeometryObject, np.ndarray]] | None:
+        """Per geometry object of the ghost robot ``(object, (4, 4) placement)``, or None."""
+        if self._ghost_oMg is None:
+            return None
+        return list(zip(self.visual_model.geometryObjects, self._ghost_oMg))
+
+    def end_position(self, k: int) -> np.ndarray | None:
+        """(3,) world position (m) of ``frame_name`` at frame ``k``, or None without it."""
+        m = self._frame_oMf[int(k)]
+        return None if m is None else np.array(m[:3, 3])
+
     def _center(self) -> np.ndarray:
         lo, hi = self.bbox
         return 0.5 * (lo + hi)
@@ -953,6 +1394,82 @@ class Animation:
         """Height of the grid (m, world z): the world floor z = 0, or lower when the robot
         reaches below it."""
         return min(0.0, float(self.bbox[0][2]))
+
+    def _legend(self) -> list[dict]:
+        """The legend rows of the page (shape, CSS colour, text); empty without ``legend``."""
+        legend: list[dict] = []
+        if not self.legend:
+            return legend
+        any_unstable = (self.stable is not None and not all(self.stable)) or any(
+            not s for br in self.branches for q, s in zip(br.frames, br.stable) if q is not None
+        )
+        if self.stable is not None or self.branches:
+            legend.append(
+                {"shape": "box", "color": _css(STABLE_COLOR), "text": "stable equilibrium"}
+            )
+            if any_unstable or self.branches:
+                legend.append(
+                    {
+                        "shape": "box",
+                        "color": _css(UNSTABLE_COLOR),
+                        "text": "unstable equilibrium"
+                        + (
+                            " (red: the parts that take part in its unstable mode)"
+                            if (
+                                self.modes is not None
+                                and any(m is not None and m.size for m in self.modes)
+                            )
+                            or self.unstable_joints
+                            else ""
+                        ),
+                    }
+                )
+        if self.critical_index is not None:
+            legend.append(
+                {"shape": "ring", "color": _css(CRITICAL_COLOR), "text": "critical point"}
+            )
+        if self._arrows:
+            what = (["force on the end"] if self.forces is not None else []) + (
+                ["dead loads"] if self.loads else []
+            )
+            legend.append(
+                {
+                    "shape": "arrow",
+                    "color": _css(FORCE_COLOR),
+                    "text": f"{' and '.join(what)} (length ∝ |F|)",
+                }
+            )
+        if self.closures:
+            legend.append(
+                {
+                    "shape": "box",
+                    "color": _css(CLOSURE_COLOR),
+                    "text": "loop closure (frame_a, frame_b)",
+                }
+            )
+        if self.ellipsoid is not None:
+            legend.append(
+                {
+                    "shape": "box",
+                    "color": _css(ELLIPSOID_COLOR[:3] + (0.6,)),
+                    "text": self.ellipsoid_label,
+                }
+            )
+        if self.ghost_q is not None:
+            legend.append(
+                {
+                    "shape": "box",
+                    "color": _css(GHOST_COLOR[:3] + (0.6,)),
+                    "text": "unloaded robot",
+                }
+            )
+        if self.points is not None:
+            legend += [
+                {"shape": "box", "color": _css(rgba), "text": t}
+                for rgba, t in self.points["legend"]
+            ]
+        legend += [{"shape": "note", "color": "transparent", "text": t} for t in self.legend_notes]
+        return legend
 
     def page_setup(self) -> dict:
         """What the exported page's script needs: labels, anchored labels, camera, legend."""
@@ -963,15 +1480,12 @@ class Animation:
 
         anchors = []
         n = len(self.frames)
-        if self.forces is not None:
+        for arrow in self._arrows:
             anchors.append(
                 {
-                    "cls": "force",
-                    "pos": [sh(p) for p in self._force_label_points],
-                    "text": [
-                        f"F = {m:.3g} N" if m > 0 else ""
-                        for m in (float(np.linalg.norm(f)) for f in self.forces)
-                    ],
+                    "cls": arrow["cls"],
+                    "pos": [sh(p) for p in arrow["label_points"]],
+                    "text": arrow["texts"],
                 }
             )
         if self.critical_index is not None:
@@ -982,43 +1496,7 @@ class Animation:
                     "text": [self.critical_label] * n,
                 }
             )
-        legend = []
-        if self.legend:
-            any_unstable = (self.stable is not None and not all(self.stable)) or any(
-                not s for br in self.branches for q, s in zip(br.frames, br.stable) if q is not None
-            )
-            if self.stable is not None or self.branches:
-                legend.append(
-                    {"shape": "box", "color": _css(STABLE_COLOR), "text": "stable equilibrium"}
-                )
-                if any_unstable or self.branches:
-                    legend.append(
-                        {
-                            "shape": "box",
-                            "color": _css(UNSTABLE_COLOR),
-                            "text": "unstable equilibrium",
-                        }
-                    )
-            if self.critical_index is not None:
-                legend.append(
-                    {"shape": "ring", "color": _css(CRITICAL_COLOR), "text": "critical point"}
-                )
-            if self.forces is not None:
-                legend.append(
-                    {
-                        "shape": "arrow",
-                        "color": _css(FORCE_COLOR),
-                        "text": "force on the end (length ∝ |F|)",
-                    }
-                )
-            if self.ghost_q is not None:
-                legend.append(
-                    {
-                        "shape": "box",
-                        "color": _css(GHOST_COLOR[:3] + (0.6,)),
-                        "text": "unloaded robot",
-                    }
-                )
+        legend = self._legend()
         return {
             "fps": self.fps,
             "nframes": n,
@@ -1047,8 +1525,7 @@ class Animation:
         """
         _import_meshcat()
         import meshcat.animation as ma
-        import meshcat.geometry as mg
-        from meshcat.commands import Delete, SetObject, SetProperty, SetTransform
+        from meshcat.commands import Delete
         from meshcat.path import Path as MPath
 
         root = MPath(("meshcat", "vjm"))
@@ -1085,6 +1562,27 @@ class Animation:
             for k in range(n):
                 prop(path, k, name, "boolean", bool(flags[k]))
 
+        self._robot_commands(cmds, node, track_transform, color_track, bool_track)
+        self._overlay_commands(cmds, node, prop, track_transform, bool_track)
+        if self._text_box is not None:
+            self._text_commands(cmds, node, prop)
+
+        self._critical_commands(cmds, node)
+        self._camera_commands(cmds, root)
+        if n > 1:
+            cmds.append(
+                _SetAnimationAt(anim, node("animation"), repetitions=(math.inf if self.loop else 1))
+            )
+        return cmds
+
+
+    def _robot_commands(self, cmds, node, track_transform, color_track, bool_track) -> None:
+        """The robot (animated, stability colours), the other branches (animated, shown where
+        they exist) and the ghost (static); helpers of :meth:`commands`."""
+        from meshcat.commands import SetObject, SetProperty, SetTransform
+        from meshcat.path import Path as MPath
+
+        n = len(self.frames)
         # --- robot (animated), other branches (animated) and ghost (static)
         names = _node_names(self.visual_model)
         for gi, go in enumerate(self.visual_model.geometryObjects):
@@ -1094,7 +1592,8 @@ class Animation:
             geom, intrinsic = conv
             base_rgba = tuple(float(c) for c in go.meshColor)
             recol = self.stable is not None and self.recolor(go.name)
-            rgba = (STABLE_COLOR if self.stable[0] else UNSTABLE_COLOR) if recol else base_rgba
+            gflags = [self._geom_stable[k][gi] for k in range(n)] if recol else []
+            rgba = (STABLE_COLOR if gflags[0] else UNSTABLE_COLOR) if recol else base_rgba
             path = node("robot", names[gi])
             cmds.append(SetObject(geom, _material(rgba), path))
             obj_path = MPath(path.entries + ("<object>",))
@@ -1103,8 +1602,8 @@ class Animation:
             cmds.append(SetTransform(mats[0], path))
             if any(not np.allclose(m, mats[0], atol=1e-12) for m in mats[1:]):
                 track_transform(path, mats)
-            if recol and len(set(self.stable)) > 1:
-                color_track(obj_path, self.stable)
+            if recol and len(set(gflags)) > 1:
+                color_track(obj_path, gflags)
             for bi, br in enumerate(self.branches):
                 shown = [q is not None for q in br.frames]
                 first = shown.index(True) if any(shown) else 0
@@ -1144,53 +1643,10 @@ class Animation:
             if len(set(shown)) > 1:
                 bool_track(node(f"branch{bi}"), "visible", shown)
 
-        # --- force arrow: node "force" at the arrow's tail with +y along F, shaft scaled along y
-        if self.forces is not None:
-            L = float(self.arrow_length)
-            head_len, head_r, shaft_r = 0.2 * L, 0.07 * L, 0.025 * L
-            fpath, spath, hpath = node("force"), node("force", "shaft"), node("force", "head")
-            cmds.append(SetObject(mg.Cylinder(1.0, shaft_r), _material(FORCE_COLOR), spath))
-            cmds.append(
-                SetTransform(_translation([0, 0.5, 0]), MPath(spath.entries + ("<object>",)))
-            )
-            cmds.append(
-                SetObject(
-                    mg.Cylinder(head_len, radiusTop=0.0, radiusBottom=head_r),
-                    _material(FORCE_COLOR),
-                    hpath,
-                )
-            )
-            cmds.append(
-                SetTransform(
-                    _translation([0, 0.5 * head_len, 0]), MPath(hpath.entries + ("<object>",))
-                )
-            )
-            ey = np.array([0.0, 1.0, 0.0])
-            mats, shaft_scale, head_scale, visible = [], [], [], []
-            for k in range(n):
-                m = np.eye(4)
-                m[:3, 3] = self._arrow_tails[k]
-                m[:3, :3] = pin.Quaternion.FromTwoVectors(
-                    ey, self._arrow_dirs[k]
-                ).toRotationMatrix()
-                mats.append(m)
-                length = self._arrow_lengths[k]
-                hs = min(1.0, length / (2.0 * head_len)) if head_len > 0 else 1.0
-                shaft_scale.append(max(length - hs * head_len, 1e-6))
-                head_scale.append(max(hs, 1e-6))
-                visible.append(bool(length > 0))
-            cmds.append(SetTransform(mats[0], fpath))
-            if n > 1:
-                track_transform(fpath, mats)
-                for k in range(n):
-                    prop(spath, k, "scale", "vector3", [1.0, shaft_scale[k], 1.0])
-                    prop(hpath, k, "position", "vector3", [0.0, shaft_scale[k], 0.0])
-                    prop(hpath, k, "scale", "vector3", [head_scale[k]] * 3)
-                bool_track(fpath, "visible", visible)
-            cmds.append(SetProperty("scale", [1.0, shaft_scale[0], 1.0], spath))
-            cmds.append(SetTransform(_translation([0.0, shaft_scale[0], 0.0]), hpath))
-            cmds.append(SetProperty("scale", [head_scale[0]] * 3, hpath))
-            cmds.append(SetProperty("visible", visible[0], fpath))
+    def _critical_commands(self, cmds, node) -> None:
+        """The critical marker (:meth:`commands`)."""
+        import meshcat.geometry as mg
+        from meshcat.commands import SetObject, SetTransform
 
         # --- critical marker: a ring (facing the camera) around the end point of the
         # critical frame, larger than the end sphere, and a pin above it for the label
@@ -1226,6 +1682,11 @@ class Animation:
             )
             cmds.append(SetTransform(_translation(self._pin_top), node("critical", "head")))
 
+    def _camera_commands(self, cmds, root) -> None:
+        """Scene shift, grid, axes and camera (:meth:`commands`)."""
+        from meshcat.commands import SetProperty, SetTransform
+        from meshcat.path import Path as MPath
+
         # --- camera. meshcat's orbit controls look at the world origin (their target is not
         # reachable by commands; the exported page's script sets it), so the scene is shifted
         # instead: the robot, the grid and the axes are translated by -centre of the bounding
@@ -1251,11 +1712,143 @@ class Animation:
         # the camera lives in the frame "rotated" (y up): world (x, y, z) -> (x, z, -y)
         cmds.append(SetProperty("position", [float(off[0]), float(off[2]), float(-off[1])], cam))
 
-        if n > 1:
+    def _overlay_commands(self, cmds, node, prop, track_transform, bool_track) -> None:
+        """Append the commands of the force and dead-load arrows, the closure markers and the
+        ellipsoid (helpers of :meth:`commands`: ``node`` makes a path under the root, ``prop``
+        keys a property, ``track_transform``/``bool_track`` animate a node)."""
+        for part in (self._arrow_commands, self._closure_commands, self._ellipsoid_commands):
+            part(cmds, node, prop, track_transform, bool_track)
+        if self.points is not None:
+            import meshcat.geometry as mg
+            from meshcat.commands import SetObject
+
+            pc = self.points
             cmds.append(
-                _SetAnimationAt(anim, node("animation"), repetitions=(math.inf if self.loop else 1))
+                SetObject(
+                    mg.PointsGeometry(pc["positions"].T, pc["colors"].T),
+                    mg.PointsMaterial(size=pc["size"]),
+                    node("points"),
+                )
             )
-        return cmds
+
+    def _arrow_commands(self, cmds, node, prop, track_transform, bool_track) -> None:
+        """Force and dead-load arrows (:meth:`_overlay_commands`)."""
+        import meshcat.geometry as mg
+        from meshcat.commands import SetObject, SetProperty, SetTransform
+        from meshcat.path import Path as MPath
+
+        n = len(self.frames)
+        # --- force arrows (end force, dead loads): node at the arrow's tail with +y along F,
+        # the shaft scaled along y
+        L = float(self.arrow_length)
+        head_len, head_r, shaft_r = 0.2 * L, 0.07 * L, 0.025 * L
+        ey = np.array([0.0, 1.0, 0.0])
+        for arrow in self._arrows:
+            fpath = node(arrow["node"])
+            spath, hpath = node(arrow["node"], "shaft"), node(arrow["node"], "head")
+            cmds.append(SetObject(mg.Cylinder(1.0, shaft_r), _material(FORCE_COLOR), spath))
+            cmds.append(
+                SetTransform(_translation([0, 0.5, 0]), MPath(spath.entries + ("<object>",)))
+            )
+            cmds.append(
+                SetObject(
+                    mg.Cylinder(head_len, radiusTop=0.0, radiusBottom=head_r),
+                    _material(FORCE_COLOR),
+                    hpath,
+                )
+            )
+            cmds.append(
+                SetTransform(
+                    _translation([0, 0.5 * head_len, 0]), MPath(hpath.entries + ("<object>",))
+                )
+            )
+            mats, shaft_scale, head_scale, visible = [], [], [], []
+            for k in range(n):
+                m = np.eye(4)
+                m[:3, 3] = arrow["tails"][k]
+                m[:3, :3] = pin.Quaternion.FromTwoVectors(ey, arrow["dirs"][k]).toRotationMatrix()
+                mats.append(m)
+                length = arrow["lengths"][k]
+                hs = min(1.0, length / (2.0 * head_len)) if head_len > 0 else 1.0
+                shaft_scale.append(max(length - hs * head_len, 1e-6))
+                head_scale.append(max(hs, 1e-6))
+                visible.append(bool(length > 0))
+            cmds.append(SetTransform(mats[0], fpath))
+            if n > 1:
+                track_transform(fpath, mats)
+                for k in range(n):
+                    prop(spath, k, "scale", "vector3", [1.0, shaft_scale[k], 1.0])
+                    prop(hpath, k, "position", "vector3", [0.0, shaft_scale[k], 0.0])
+                    prop(hpath, k, "scale", "vector3", [head_scale[k]] * 3)
+                bool_track(fpath, "visible", visible)
+            cmds.append(SetProperty("scale", [1.0, shaft_scale[0], 1.0], spath))
+            cmds.append(SetTransform(_translation([0.0, shaft_scale[0], 0.0]), hpath))
+            cmds.append(SetProperty("scale", [head_scale[0]] * 3, hpath))
+            cmds.append(SetProperty("visible", visible[0], fpath))
+
+    def _closure_commands(self, cmds, node, prop, track_transform, bool_track) -> None:
+        """Loop-closure markers (:meth:`_overlay_commands`)."""
+        import meshcat.geometry as mg
+        from meshcat.commands import SetObject, SetTransform
+        from meshcat.path import Path as MPath
+
+        n = len(self.frames)
+        # --- loop closures: a violet cube at frame_b and one turned 45° at frame_a (they
+        # coincide where the loop is closed), following the frames
+        # larger than the joint spheres there, translucent: the joint stays visible inside
+        joint_size = max(
+            [
+                float(np.max(box.max(axis=0) - box.min(axis=0)))
+                for go, box in zip(self.visual_model.geometryObjects, self._local_boxes)
+                if go.name.startswith(JOINT_MARKER_PREFIX) and not go.name.endswith(":springs")
+            ],
+            default=0.0,
+        )
+        edge = max(0.025 * self.scene_size, 1.2 * joint_size)
+        nl = len(self.loads)
+        turn = np.eye(4)
+        turn[:3, :3] = pin.utils.rotate("z", math.pi / 4) @ pin.utils.rotate("x", math.pi / 4)
+        for ci, (_, _, _) in enumerate(self.closures):
+            for j, (part, size, rot) in enumerate((("b", edge, np.eye(4)), ("a", 0.8 * edge, turn))):
+                path = node(f"closure{ci}", part)
+                cmds.append(SetObject(mg.Box([size] * 3), _closure_material(), path))
+                cmds.append(SetTransform(rot, MPath(path.entries + ("<object>",))))
+                mats = [_translation(self._extra_pos[k][nl + 2 * ci + (1 - j)]) for k in range(n)]
+                cmds.append(SetTransform(mats[0], path))
+                if any(not np.allclose(m, mats[0], atol=1e-12) for m in mats[1:]):
+                    track_transform(path, mats)
+
+    def _ellipsoid_commands(self, cmds, node, prop, track_transform, bool_track) -> None:
+        """The compliance ellipsoid (:meth:`_overlay_commands`)."""
+        import meshcat.geometry as mg
+        from meshcat.commands import SetObject, SetProperty, SetTransform
+
+        n = len(self.frames)
+        # --- compliance ellipsoid at the end frame: node "ellipsoid" (position, principal
+        # axes) and its unit sphere "ellipsoid/shape" scaled by the semi-axes
+        if self.ellipsoid is not None:
+            epath, shape = node("ellipsoid"), node("ellipsoid", "shape")
+            cmds.append(SetObject(mg.Sphere(1.0), _material(ELLIPSOID_COLOR), shape))
+            first = next((e for e in self.ellipsoid if e is not None), None)
+            mats, scales, visible = [], [], []
+            for k in range(n):
+                e = self.ellipsoid[k] or first
+                m = np.eye(4)
+                m[:3, 3] = self._frame_oMf[k][:3, 3]
+                if e is not None:
+                    m[:3, :3] = e[1]
+                mats.append(m)
+                scales.append([max(float(a), 1e-9) for a in (e[0] if e is not None else np.ones(3))])
+                visible.append(self.ellipsoid[k] is not None)
+            cmds.append(SetTransform(mats[0], epath))
+            cmds.append(SetProperty("scale", scales[0], shape))
+            cmds.append(SetProperty("visible", visible[0], epath))
+            if n > 1:
+                track_transform(epath, mats)
+                for k in range(n):
+                    prop(shape, k, "scale", "vector3", scales[k])
+                if len(set(visible)) > 1:
+                    bool_track(epath, "visible", visible)
 
     # ------------------------------------------------------------------ outputs
     def to_html(self) -> str:
@@ -1752,6 +2345,7 @@ def serve(
     _import_meshcat()
     import meshcat
 
+    kwargs.setdefault("scene_labels", True)
     anim = Animation(model, visual_model, frames, **kwargs)
     with contextlib.redirect_stdout(io.StringIO()):  # meshcat prints the URL itself
         vis = meshcat.Visualizer(zmq_url=zmq_url)
@@ -1842,16 +2436,82 @@ def package_dirs() -> list[str]:
     return dirs
 
 
-def mesh_geometry(model: pin.Model, urdf_text: str, extra_dirs=()) -> pin.GeometryModel | None:
+@dataclass(frozen=True)
+class MeshVisuals:
+    """The robot's own visual geometry as loaded by :func:`load_visuals`.
+
+    Attributes:
+        geometry: The visual :class:`pinocchio.GeometryModel`, or None when the URDF has no
+            ``<visual>`` or its meshes could not all be loaded (draw primitives instead).
+        missing: Mesh names that no folder of the search path holds
+            (:func:`vjm_pin.model.meshes.resolve_meshes`), in file order.
+        error: Why the meshes could not be loaded although all were found, or None.
+    """
+
+    geometry: pin.GeometryModel | None
+    missing: tuple[str, ...] = ()
+    error: str | None = None
+
+    @property
+    def note(self) -> str | None:
+        """One line saying that primitives replace the meshes (None when nothing is missing)."""
+        if self.missing:
+            k = len(self.missing)
+            return f"{k} mesh file{'s' if k > 1 else ''} not found: drawn as primitives"
+        if self.error:
+            return "meshes could not be loaded: drawn as primitives"
+        return None
+
+
+def load_visuals(
+    model: pin.Model,
+    urdf_text: str,
+    package_dirs: Sequence[str | os.PathLike] = (),
+    urdf_dir: str | os.PathLike | None = None,
+) -> MeshVisuals:
+    """Visual geometry of a URDF with ``<visual>`` meshes or primitives.
+
+    Mesh names (``package://``, ``file://``, relative) are resolved by
+    :func:`vjm_pin.model.meshes.resolve_meshes` over ``package_dirs``, ``ROS_PACKAGE_PATH``,
+    ``urdf_dir`` and example-robot-data. Each mesh that is not found is named in one warning
+    (``warnings.warn``) and the whole robot is then left to primitives (``geometry`` None): a
+    robot with some links missing would look like a different mechanism. A mesh that is found
+    but cannot be read is warned about too.
+    """
+    from vjm_pin.model.meshes import resolve_meshes
+
+    if "<visual" not in urdf_text:
+        return MeshVisuals(None)
+    quiet = logging.getLogger("yourdfpy.urdf")  # it logs every folder a name is not in
+    level = quiet.level
+    quiet.setLevel(logging.ERROR)
+    try:
+        res = resolve_meshes(urdf_text, package_dirs, urdf_dir)
+    finally:
+        quiet.setLevel(level)
+    if res.missing:
+        where = ", ".join(res.search_path) or "no folder"
+        for name in res.missing:
+            warnings.warn(
+                f"mesh '{name}' not found (searched {where}; add --package-dir or set "
+                "ROS_PACKAGE_PATH); the robot is drawn with primitives",
+                stacklevel=2,
+            )
+        return MeshVisuals(None, tuple(res.missing))
+    try:
+        geom = pin.buildGeomFromUrdfString(model, res.urdf, pin.GeometryType.VISUAL)
+    except (ValueError, RuntimeError, OSError) as e:
+        msg = " ".join(str(e).split()) or type(e).__name__
+        warnings.warn(f"could not load the robot's meshes ({msg}); drawn with primitives", stacklevel=2)
+        return MeshVisuals(None, (), msg)
+    return MeshVisuals(geom if geom.ngeoms else None)
+
+
+def mesh_geometry(
+    model: pin.Model, urdf_text: str, extra_dirs=(), urdf_dir=None
+) -> pin.GeometryModel | None:
     """Visual geometry of a URDF that has ``<visual>`` meshes or primitives (e.g. the robots
     of ``example-robot-data``, whose visuals the VJM generator keeps), or None when it has
-    none or they cannot be loaded (then use :func:`chain_geometry`)."""
-    if "<visual" not in urdf_text:
-        return None
-    try:
-        geom = pin.buildGeomFromUrdfString(
-            model, urdf_text, pin.GeometryType.VISUAL, package_dirs=[*extra_dirs, *package_dirs()]
-        )
-    except (ValueError, RuntimeError, OSError):
-        return None
-    return geom if geom.ngeoms else None
+    none or they cannot be loaded (then use :func:`chain_geometry`); missing meshes are
+    warned about (:func:`load_visuals`)."""
+    return load_visuals(model, urdf_text, extra_dirs, urdf_dir).geometry
