@@ -1,11 +1,13 @@
 """Write the Orthoglide VJM models ``models/urdf/orthoglide-q{0..4}.urdf`` (folded parallelogram),
-``orthoglide-coupled-q{0..4}.urdf`` (folded, coupler rotation spring) and
-``orthoglide-2bar-q{0..4}.urdf`` (both bars modelled).
+``orthoglide-coupled-q{0..4}.urdf`` (folded, coupler rotation spring),
+``orthoglide-2bar-q{0..4}.urdf`` (both bars modelled, two chains) and
+``orthoglide-loop-q{0..4}.urdf`` (both bars modelled, parallelograms as true closed loops).
 
 Paper: Pashkevich, Klimchik, Chablat, MMT 46 (2011), §6.2, Table 2 ("the seed paper").
 Every number below carries its source or derivation; ``docs/orthoglide_sources.md`` (§ numbers
 quoted as "src §x") gives the full argument, ``docs/orthoglide.md`` the results.
-``tests/test_orthoglide.py`` regenerates the files and fails if a committed file differs.
+``tests/test_orthoglide.py`` (and ``tests/test_orthoglide_loops.py`` for the loop variant)
+regenerates the files and fails if a committed file differs.
 
 Architecture (seed §6.2; src §2.1): three identical P–R–Pa–R legs, actuated prismatic joints
 along the mutually orthogonal base axes e_1, e_2, e_3, a foot (cantilever bracket) carrying the
@@ -42,6 +44,17 @@ Variants
     the two bars carry equal forces, softer otherwise (the superposition of paper §5 cannot
     close a loop at the foot). The in-plane coupler rotation is resisted by the two bars'
     differential stretching, which the folded variant lacks.
+``orthoglide-loop-qK`` (true loops, explicit closures; :func:`_loop_leg`): one shared actuator
+    and foot per leg, then R1; from the first axle two bars at ±d/2 along it, each with passive
+    Pa1, Pa2 at its ends and its own ``BAR_SEGMENTS`` segment springs (x, z, φx, φy). Bar a runs
+    into the second axle (which carries R2); bar b's end is held on the second axle by the
+    ``<vjm:closure>`` ``legK_parallelogram`` in all six components. Leg 1 carries the platform
+    (task frame :data:`PLATFORM_FRAME`); legs 2 and 3 are held on it by the closures
+    ``legK_platform`` (all six components). No ``<vjm:leg>``: the file is a mechanism for
+    :class:`~vjm_pin.solver.mechanism.MechanismSolver`. Closure rank on the free coordinates
+    30 of 30 rows (none redundant; on the passive joints alone 18, the rigid linkage being
+    over-constrained). ``orthoglide_urdf(point, "folded", platform="closures")`` writes the
+    folded model the same way (for the comparison, ``scripts/compare_orthoglide_loops.py``).
 
 Usage: ``python scripts/make_orthoglide.py [--out models/urdf]``
 """
@@ -49,6 +62,7 @@ Usage: ``python scripts/make_orthoglide.py [--out models/urdf]``
 from __future__ import annotations
 
 import argparse
+import itertools
 import math
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -281,31 +295,22 @@ class _Writer:
         return ET.tostring(self.root, encoding="unicode") + "\n"
 
 
-def _leg(
-    w: _Writer,
-    name: str,
-    i: int,
-    p,
-    k_act: float,
-    k_foot,
-    bar_y: float,
-    k_bar,
-    r: float,
-    rp: float = 0.0,
-    k_coupler: float | None = None,
-):
-    """One serial leg (or one bar of a two-bar leg when ``bar_y`` ≠ 0) ending at the platform.
-
-    The leg's R2 joint is at P − r·e_i + rp·n_i (platform offsets, :data:`PLATFORM_R`,
-    :data:`PLATFORM_RP`). With ``k_coupler`` the parallelogram joints Pa1, Pa2 are a spring
-    pair of stiffness ``k_coupler·[[1, 1], [1, 1]] + ε I`` on the coupler rotation Pa1 + Pa2
-    (see :data:`EPS_MOBILITY`), else two passive joints."""
+def _actuator_and_foot(w: _Writer, name: str, i: int, p, k_act: float, k_foot, r: float, rp: float):
+    """Actuated slider, foot with its 6-D tip spring and the fixed turn to the leg frame
+    (e_i, y_i, n_i) at A_i. Returns (link, a, b): the leg-frame link at A_i and the unloaded
+    R1 and Pa1 angles (:func:`leg_angles` at P − r·e_i)."""
     e, y, n = E3[i], E3[(i + 1) % 3], E3[(i + 2) % 3]
     rho, a, b = leg_angles(np.asarray(p, float) - r * e, i)
     lf = FOOT.length
     # actuator: the carriage sits at (rp − l_f) n_i + ρ e_i, so A_i = ρ e_i + rp n_i (constant
     # offsets: the kinematics of src §2.2 holds); actuated joint with its spring (rest = ρ)
     link = w.joint(f"{name}_act", "prismatic", "base", xyz=(rp - lf) * n, axis=e)
+    # the stroke: ρ over the corners of the workspace cube (what a map samples)
+    corners = [np.array(c) for c in itertools.product((S_MINUS, S_PLUS), repeat=3)]
+    rhos = [leg_angles(c - r * e, i)[0] for c in corners]
+    lim = w.root.find(f"joint[@name='{name}_act']/limit")
+    lim.set("lower", repr(float(min(rhos))))
+    lim.set("upper", repr(float(max(rhos))))
     w.tag(
         "joint",
         {
@@ -323,6 +328,31 @@ def _leg(
     # leg frame (e_i, y_i, n_i) at A_i
     r_leg = np.column_stack([e, y, n])
     link = w.joint(f"{name}_to_leg", "fixed", link, rpy=_rpy(r_foot.T @ r_leg))
+    return link, a, b
+
+
+def _leg(
+    w: _Writer,
+    name: str,
+    i: int,
+    p,
+    k_act: float,
+    k_foot,
+    bar_y: float,
+    k_bar,
+    r: float,
+    rp: float = 0.0,
+    k_coupler: float | None = None,
+    platform: str = "leg",
+):
+    """One serial leg (or one bar of a two-bar leg when ``bar_y`` ≠ 0) ending at the platform.
+
+    The leg's R2 joint is at P − r·e_i + rp·n_i (platform offsets, :data:`PLATFORM_R`,
+    :data:`PLATFORM_RP`). With ``k_coupler`` the parallelogram joints Pa1, Pa2 are a spring
+    pair of stiffness ``k_coupler·[[1, 1], [1, 1]] + ε I`` on the coupler rotation Pa1 + Pa2
+    (see :data:`EPS_MOBILITY`), else two passive joints. ``platform``: ``"leg"`` writes the
+    ``<vjm:leg>`` shorthand, ``"carry"``/``"close"`` end the leg as :func:`_platform_end`."""
+    link, a, b = _actuator_and_foot(w, name, i, p, k_act, k_foot, r, rp)
     link = w.joint(f"{name}_R1", "revolute", link, axis=(0, 1, 0))
     w.tag("joint", {"name": f"{name}_R1", "role": "passive", "position": repr(a)})
     if bar_y:
@@ -355,24 +385,129 @@ def _leg(
     w.tag("joint", {"name": f"{name}_R2", "role": "passive", "position": repr(-a)})
     # the end link has the leg-frame orientation (e_i, y_i, n_i) at the reference:
     # P = R2 + r e_i − rp n_i
-    w.tag("leg", {"name": name, "frame": link, "offset": _f((r, 0.0, -rp))})
+    if platform == "leg":
+        w.tag("leg", {"name": name, "frame": link, "offset": _f((r, 0.0, -rp))})
+    else:
+        _platform_end(w, name, i, link, r, rp, platform == "carry")
+
+
+def _bar(w: _Writer, name: str, link: str, b: float, k_bar) -> str:
+    """One parallelogram bar from ``link`` (its first axle, leg-frame orientation): passive Pa1
+    (axis n_i, unloaded b), ``BAR_SEGMENTS`` rigid segments each ending in its 4-D spring
+    (x, z, φx, φy; ``k_bar`` one segment's), passive Pa2 (−b). Returns the link after Pa2 (the
+    second axle's orientation)."""
+    link = w.joint(f"{name}_Pa1", "revolute", link, axis=(0, 0, 1))
+    w.tag("joint", {"name": f"{name}_Pa1", "role": "passive", "position": repr(b)})
+    for j in range(1, BAR_SEGMENTS + 1):
+        link = w.joint(f"{name}_bar{j}", "fixed", link, xyz=(L_BAR / BAR_SEGMENTS, 0, 0))
+        link = w.spring(f"{name}_bar{j}_s", link, ("x", "z", "rx", "ry"), k_bar)
+    link = w.joint(f"{name}_Pa2", "revolute", link, axis=(0, 0, 1))
+    w.tag("joint", {"name": f"{name}_Pa2", "role": "passive", "position": repr(-b)})
+    return link
+
+
+#: Components of every closure of the closed variants (all six: each loop has springs in every
+#: direction, so no row is redundant; docs/orthoglide.md "Loop variant").
+CLOSURE_COMPONENTS = "x y z rx ry rz"
+#: Task frame of the closed variants: the platform point P, world-aligned at the reference.
+PLATFORM_FRAME = "platform_link"
+
+
+def _platform_end(w: _Writer, name: str, i: int, link: str, r: float, rp: float, carry: bool):
+    """End of leg ``name`` at the platform, with explicit closures (no ``<vjm:leg>``).
+
+    ``link`` (after R2) has the leg-frame orientation at the reference; a fixed joint puts a
+    world-aligned frame at the platform point P = R2 + r e_i − rp n_i. The carrying leg (leg 1)
+    names it :data:`PLATFORM_FRAME` (the rigid platform and the task frame); every other leg's
+    frame ``<leg>_at_platform_link`` is held on it by a ``<vjm:closure>`` in all six components
+    (the platform is one rigid body)."""
+    r_leg = np.column_stack([E3[i], E3[(i + 1) % 3], E3[(i + 2) % 3]])
+    jname = "platform" if carry else f"{name}_at_platform"
+    end = w.joint(jname, "fixed", link, xyz=(r, 0.0, -rp), rpy=_rpy(r_leg.T))
+    if not carry:
+        w.tag(
+            "closure",
+            {
+                "name": f"{name}_platform",
+                "frame_a": end,
+                "frame_b": PLATFORM_FRAME,
+                "components": CLOSURE_COMPONENTS,
+            },
+        )
+
+
+def _loop_leg(
+    w: _Writer, name: str, i: int, p, k_act: float, k_foot, k_bar, r: float, rp: float, carry: bool
+):
+    """One leg with its parallelogram as a true loop (variant ``loop``).
+
+    Actuator, foot and R1 as :func:`_leg`; the link after R1 is the first axle. Bar ``a`` runs
+    from the axle point +d/2·y_i (Pa1a, segments, Pa2a) into the second axle: the link
+    ``<leg>_axle2`` (at −d·y_i from bar a's end, i.e. where bar b ends) and, d/2 back, its centre
+    carrying R2 and the platform end. Bar ``b`` runs from −d/2·y_i (Pa1b, segments, Pa2b); its
+    end link coincides with ``<leg>_axle2`` at the reference and is held on it by the closure
+    ``<leg>_parallelogram`` in all six components (a rigid axle). Both bars have their own springs (the same 4-D segment springs as the
+    two-bar variant) and passive revolutes at both ends, so the coupler rotation, the
+    parallelogram constraint and the bars' differential stretching/bending come out of the
+    loop instead of being folded into one spring."""
+    link, a, b = _actuator_and_foot(w, name, i, p, k_act, k_foot, r, rp)
+    axle1 = w.joint(f"{name}_R1", "revolute", link, axis=(0, 1, 0))
+    w.tag("joint", {"name": f"{name}_R1", "role": "passive", "position": repr(a)})
+    half = D_AXLE / 2
+    link = w.joint(f"{name}a_axle1", "fixed", axle1, xyz=(0, half, 0))
+    link = _bar(w, f"{name}a", link, b, k_bar)
+    axle2 = w.joint(f"{name}_axle2", "fixed", link, xyz=(0, -2 * half, 0))
+    # ``axle2`` is the second axle at bar b's end point (−d/2·y_i); R2 sits at its centre
+    link = w.joint(f"{name}b_axle1", "fixed", axle1, xyz=(0, -half, 0))
+    bend = _bar(w, f"{name}b", link, b, k_bar)
+    w.tag(
+        "closure",
+        {
+            "name": f"{name}_parallelogram",
+            "frame_a": bend,
+            "frame_b": axle2,
+            "components": CLOSURE_COMPONENTS,
+        },
+    )
+    link = w.joint(f"{name}_axle2c", "fixed", axle2, xyz=(0, half, 0))
+    link = w.joint(f"{name}_R2", "revolute", link, axis=(0, 1, 0))
+    w.tag("joint", {"name": f"{name}_R2", "role": "passive", "position": repr(-a)})
+    _platform_end(w, name, i, link, r, rp, carry)
 
 
 def orthoglide_urdf(
-    point: str, variant: str = "folded", r: float = PLATFORM_R, rp: float = PLATFORM_RP
+    point: str,
+    variant: str = "folded",
+    r: float = PLATFORM_R,
+    rp: float = PLATFORM_RP,
+    platform: str = "leg",
 ) -> str:
     """URDF text of the Orthoglide at work point ``point`` (q0…q4); ``variant`` ``folded``,
-    ``coupled`` or ``2bar`` (see the module docstring); ``r``, ``rp`` the platform offsets (m)."""
+    ``coupled``, ``2bar`` or ``loop`` (see the module docstring); ``r``, ``rp`` the platform
+    offsets (m). ``platform``: ``"leg"`` joins the legs with the ``<vjm:leg>`` shorthand
+    (``docs/parallel.md``), ``"closures"`` carries the platform on leg 1 and holds the other
+    legs on it with explicit ``<vjm:closure>`` elements (task frame :data:`PLATFORM_FRAME`, all
+    six components); the ``loop`` variant always uses closures."""
+    if platform not in ("leg", "closures"):
+        raise ValueError(f"unknown platform {platform!r}; choose 'leg' or 'closures'")
+    if variant == "loop":
+        platform = "closures"
+    if point not in POINTS:
+        raise ValueError(f"unknown point {point!r}; choose one of {sorted(POINTS)}")
     p = POINTS[point]
     k_a = calibrated_actuator()
     k_foot = FOOT.stiffness()
+    names = {"folded": "orthoglide", "coupled": "orthoglide-coupled", "2bar": "orthoglide-2bar"}
+    ends = ["carry", "close", "close"] if platform == "closures" else ["leg"] * 3
     if variant in ("folded", "coupled"):
-        w = _Writer(f"orthoglide-{point}" if variant == "folded" else f"orthoglide-coupled-{point}")
+        w = _Writer(f"{names[variant]}-{point}" + ("-closed" if platform == "closures" else ""))
         k_c = parallelogram_spring()[5, 5] if variant == "coupled" else None
         for i in range(3):
             k_bar = folded_spring(L_BAR / BAR_SEGMENTS)
-            _leg(w, f"leg{i + 1}", i, p, k_a, k_foot, 0.0, k_bar, r, rp, k_c)
+            _leg(w, f"leg{i + 1}", i, p, k_a, k_foot, 0.0, k_bar, r, rp, k_c, ends[i])
     elif variant == "2bar":
+        if platform != "leg":
+            raise ValueError("the 2bar variant is written with <vjm:leg> only")
         w = _Writer(f"orthoglide-2bar-{point}")
         for i in range(3):
             for tag, sgn in (("a", 1.0), ("b", -1.0)):
@@ -388,9 +523,19 @@ def orthoglide_urdf(
                     r,
                     rp,
                 )
+    elif variant == "loop":
+        w = _Writer(f"orthoglide-loop-{point}")
+        k_seg = bar_spring(L_BAR / BAR_SEGMENTS)
+        for i in range(3):
+            _loop_leg(w, f"leg{i + 1}", i, p, k_a, k_foot, k_seg, r, rp, ends[i] == "carry")
     else:
-        raise ValueError(f"unknown variant {variant!r}; choose 'folded', 'coupled' or '2bar'")
-    w.tag("platform", {"name": "platform", "components": "x y z rx ry rz"})
+        raise ValueError(
+            f"unknown variant {variant!r}; choose 'folded', 'coupled', '2bar' or 'loop'"
+        )
+    if platform == "closures":
+        w.tag("task", {"frame": PLATFORM_FRAME, "components": CLOSURE_COMPONENTS})
+    else:
+        w.tag("platform", {"name": "platform", "components": "x y z rx ry rz"})
     return w.text()
 
 
@@ -399,12 +544,19 @@ VARIANTS = {"folded": "orthoglide", "coupled": "orthoglide-coupled", "2bar": "or
 
 
 def orthoglide_models() -> dict[str, str]:
-    """File name → URDF text of every bundled Orthoglide model."""
+    """File name → URDF text of the bundled Orthoglide models written with ``<vjm:leg>``
+    (folded, coupled, two-bar)."""
     out = {}
     for variant, prefix in VARIANTS.items():
         for point in POINTS:
             out[f"{prefix}-{point}.urdf"] = orthoglide_urdf(point, variant)
     return out
+
+
+def orthoglide_loop_models() -> dict[str, str]:
+    """File name → URDF text of the bundled loop variant ``orthoglide-loop-q{0..4}.urdf``
+    (parallelograms as true loops, explicit closures; ``tests/test_orthoglide_loops.py``)."""
+    return {f"orthoglide-loop-{point}.urdf": orthoglide_urdf(point, "loop") for point in POINTS}
 
 
 def main(argv=None) -> int:
@@ -415,7 +567,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    for name, text in orthoglide_models().items():
+    for name, text in {**orthoglide_models(), **orthoglide_loop_models()}.items():
         (out / name).write_text(text)
         print(out / name)
     return 0

@@ -1,8 +1,9 @@
 """Reproduce Table 2 and Fig. 7 of the seed paper (§6.2): the Orthoglide at Q0…Q4.
 
 For every work point the platform is moved along the bisecting line u = (1,1,1)/√3 and
-:func:`vjm_pin.parallel.trace_robot_force_curve` locates the critical points, for three
-loadings (:data:`LOADINGS`): −u with the platform free across u (a force along u at the
+:func:`vjm_pin.analysis.curve.trace_curve` (on :class:`~vjm_pin.solver.mechanism.MechanismSolver`:
+the ``<vjm:leg>`` model loads as one mechanism with closures) locates the critical points, for
+three loadings (:data:`LOADINGS`): −u with the platform free across u (a force along u at the
 platform point), −u with the displacement prescribed (platform held across u), and +u free.
 −u pushes the platform towards the actuators and compresses the legs; +u pulls. Reported: the
 unloaded stiffness along u, the critical force and deflection, the stiffness just before and
@@ -30,12 +31,9 @@ from pathlib import Path
 
 import numpy as np
 
-from vjm_pin.parallel import (
-    RobotSolver,
-    directional_stiffness,
-    load_parallel,
-    trace_robot_force_curve,
-)
+from vjm_pin.analysis.curve import trace_curve
+from vjm_pin.model.format import load_vjm
+from vjm_pin.solver.mechanism import MechanismSolver
 
 ROOT = Path(__file__).resolve().parent.parent
 U = np.ones(3) / np.sqrt(3)
@@ -61,14 +59,12 @@ def generator():
     return mod
 
 
-def unloaded(rs: RobotSolver) -> tuple[float, float]:
+def unloaded(ms: MechanismSolver) -> tuple[float, float]:
     """(free, held) stiffness along u (N/m): 1/(uᵀK⁻¹u) with the platform free across u, uᵀKu
-    with it held."""
-    k = rs.stiffness()
+    with it held (K: the unloaded K_C of the mechanism, all six platform components)."""
+    k = ms.stiffness(ms.solve()).stiffness
     d = np.concatenate([U, np.zeros(3)])
-    from vjm_pin.parallel import _complement
-
-    return directional_stiffness(k, d, _complement(d, rs.task)), float(d @ k @ d)
+    return 1.0 / float(d @ np.linalg.solve(k, d)), float(d @ k @ d)
 
 
 #: Curves computed for every model: (loading, direction). "free": a force along u at the platform
@@ -80,17 +76,18 @@ LOADINGS = (("free", "-u"), ("held", "-u"), ("free", "+u"))
 
 def analyse(source, max_deflection: float, steps: int, loadings=LOADINGS) -> dict:
     """Curves along the bisector and their summary for one model (URDF path or text)."""
-    rs = RobotSolver(load_parallel(source))
-    k_free, k_held = unloaded(rs)
+    vm = load_vjm(source)
+    ms = MechanismSolver(vm)
+    k_free, k_held = unloaded(ms)
     out = {"k_free": k_free, "k_held": k_held, "curves": {}}
     for loading, name in loadings:
         sign = -1.0 if name == "-u" else 1.0
-        c = trace_robot_force_curve(rs, sign * U, max_deflection, steps, free=loading == "free")
+        c = trace_curve(vm, sign * U, max_deflection, steps, solver=ms, free=loading == "free")
         row = {"curve": c, "crit": c.critical[0] if c.critical else None}
         row["k_large"] = c.points[-1].stiffness
         row["f_max"] = c.points[-1].force
-        row["s_end"] = c.points[-1].s
-        row["stopped"] = c.stopped
+        row["s_end"] = c.points[-1].deflection
+        row["stopped"] = ""  # trace_curve raises NoEquilibrium instead of stopping short
         if row["crit"] is not None:  # lowest stiffness past the critical point
             row["k_min_after"] = min(p.stiffness for p in c.points[row["crit"].index :])
         out["curves"][(loading, name)] = row
