@@ -27,8 +27,8 @@ matplotlib.use("Agg")  # no display needed
 import matplotlib.pyplot as plt
 import numpy as np
 
-from vjm_pin.model.registry import resolve_model
 from vjm_pin.analysis.curve import trace_curve
+from vjm_pin.model.registry import resolve_model
 
 K_THETA = 1.0  # N·m/rad, actuator stiffness of the paper models
 L = 1.0  # m, link length

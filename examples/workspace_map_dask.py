@@ -82,7 +82,9 @@ def main(argv=None) -> int:
     )
 
     result.save(out / "map.csv")
-    result.plot(out / "map.png")
+    from vjm_pin.viz.plots import save_map_plot
+
+    save_map_plot(result, out / "map.png")
     summary = {
         "model": vm.name,
         "joints": list(names),

@@ -129,3 +129,17 @@ def test_getting_started_python_block_runs(capsys):
     assert ns["eq"].stable and ns["eq"].stable_end_held
     assert ns["eq"].wrench[0] < 0  # pushing the end towards the base needs a force along −x
     assert ns["curve"].critical[0].force == pytest.approx(1.0, rel=1e-4)
+
+
+def test_cli_reference_shows_exit_statuses():
+    """The generated page carries the top-level epilog of ``vjm-pin --help``: each exit status
+    (0 ok, 2 usage/input, 3 analysis failure, 130 interrupted) on a line of its own."""
+    from vjm_pin import cli
+
+    md = _hook().cli_markdown()
+    section = re.search(r"^## Exit status and examples$(.*?)(?=^## )", md, re.DOTALL | re.MULTILINE)
+    assert section, "no exit-status section on the CLI page"
+    body = section.group(1)
+    assert cli.EPILOG.strip() in body
+    for code in (cli.EXIT_OK, cli.EXIT_USAGE, cli.EXIT_ANALYSIS, cli.EXIT_INTERRUPTED):
+        assert re.search(rf"^  {code}\s+\S", body, re.MULTILINE), f"exit status {code} missing"

@@ -38,6 +38,9 @@ def test_every_example_is_checked_here():
         "buckling_curve.py",
         "parallel_orthoglide.py",
         "workspace_map_dask.py",
+        "closed_loop_portal_frame.py",
+        "springs_from_beams.py",
+        "four_bar_coupler_load.py",
     }
     assert set(SCRIPTS) == checked, (
         f"examples without a test (or tests without an example): {set(SCRIPTS) ^ checked}"
@@ -125,3 +128,76 @@ def test_workspace_map_dask(tmp_path):
         mapped = np.array([float(row[k]) for k in ("dx_m", "dy_m", "dz_m")])
         np.testing.assert_allclose(mapped, eq.deflection[:3], rtol=1e-6, atol=1e-12)
         assert float(row["k_along_N_per_m"]) > 0
+
+
+def test_closed_loop_portal_frame(tmp_path):
+    run_example("closed_loop_portal_frame.py", tmp_path)
+    d = json.loads((tmp_path / "portal_frame.json").read_text())
+    # k and h read here from the bundled model, independently of the script.
+    from vjm_pin.model.registry import resolve_model
+
+    vm = resolve_model("portal-frame")
+    k = float(np.diag(vm.K_theta).min())
+    assert np.allclose(np.diag(vm.K_theta), k) and d["k_N_m_per_rad"] == pytest.approx(k)
+    h = float(vm.model.jointPlacements[vm.model.getJointId("corner_tl")].translation[2])
+    # Sway buckling load per column of the closed form (total potential, small φ): 2k/h.
+    assert d["P_cr_N"] == pytest.approx(2.0 * k / h, rel=1e-8)
+    assert d["above_critical"]["stable"] is False
+    assert d["above_critical"]["stable_end_held"] is True
+    # Each push curve against dΠ/dφ = 0 of Π = 2kφ² − F h sin φ − 2Ph(1 − cos φ), s = h sin φ.
+    assert len(d["curves"]) >= 2
+    for c in d["curves"]:
+        s, f, p = np.array(c["sway_m"]), np.array(c["force_N"]), c["P_N"]
+        assert s[-1] > 0.1 * h
+        phi = np.arcsin(s / h)
+        f_closed = (4 * k * phi - 2 * p * h * np.sin(phi)) / (h * np.cos(phi))
+        np.testing.assert_allclose(f, f_closed, rtol=1e-8, atol=1e-8 * np.abs(f_closed).max())
+        # sway stiffness of the straight frame: (4k − 2Ph)/h²
+        assert c["stiffness_N_per_m"][0] == pytest.approx((4 * k - 2 * p * h) / h**2, rel=1e-6)
+
+
+def test_springs_from_beams(tmp_path):
+    run_example("springs_from_beams.py", tmp_path)
+    d = json.loads((tmp_path / "beams.json").read_text())
+    length, e, k_a = d["length_m"], d["E_Pa"], d["k_shoulder_N_m_per_rad"]
+    fy, fz = d["force_N"][1], d["force_N"][2]
+    # Second moments from the textbook formulas (not from vjm_pin.model.beam).
+    inertia = {
+        "circle": (math.pi * 0.04**4 / 64,) * 2,
+        "tube": (math.pi * (0.06**4 - 0.045**4) / 64,) * 2,
+        "rectangle": (0.02 * 0.06**3 / 12, 0.06 * 0.02**3 / 12),  # (I_y, I_z), a = 60 mm along z
+    }
+    assert set(d["sections"]) == set(inertia)
+    for name, (iy, iz) in inertia.items():
+        r = d["sections"][name]
+        assert r["I_y_m4"] == pytest.approx(iy, rel=1e-12) and r["I_z_m4"] == pytest.approx(
+            iz, rel=1e-12
+        )
+        assert r["n_springs"] == 7 and r["stable"]  # the actuator + one 6-D link spring
+        dx, dy, dz = r["deflection_m"]
+        # Linear cantilever + actuator closed form; the difference is the large-deflection
+        # correction, of the order of the tip rotation squared.
+        assert dz == pytest.approx(fz * (length**3 / (3 * e * iy) + length**2 / k_a), rel=1e-3)
+        assert dy == pytest.approx(fy * length**3 / (3 * e * iz), rel=1e-3)
+        assert abs(dx) < 1e-2 * abs(dz)
+        k_lin = 1.0 / (length**3 / (3 * e * iy) + length**2 / k_a)
+        assert r["k_z_free_N_per_m"] == pytest.approx(k_lin, rel=1e-2)
+        text = (tmp_path / f"boom_{name}_vjm.urdf").read_text()
+        assert "<vjm:beam" in text and 'section="' + name + '"' in text
+
+
+def test_four_bar_coupler_load(tmp_path):
+    run_example("four_bar_coupler_load.py", tmp_path)
+    d = json.loads((tmp_path / "four_bar.json").read_text())
+    # A Load at the coupler point (task free) and the same force as the task wrench: one equilibrium.
+    np.testing.assert_allclose(
+        d["deflection_load_m"], d["deflection_task_wrench_m"], rtol=1e-7, atol=1e-12
+    )
+    dx, dz = np.array(d["deflection_load_m"])[[0, 2]]
+    # Small load: the linear response K_C⁻¹F within the large-deflection correction.
+    np.testing.assert_allclose([dx, dz], d["deflection_linear_m"], rtol=2e-2)
+    # Statics about the base pin (no moment there): load + pivot reaction + crank spring = 0.
+    m = d["moments_about_base_N_m"]
+    assert abs(m["load"]) > 0.1 and abs(m["crank"]) > 0.01
+    assert m["load"] + m["pivot"] + m["crank"] == pytest.approx(0.0, abs=1e-8 * abs(m["load"]))
+    assert d["stable"]

@@ -1,7 +1,8 @@
 """MkDocs hook: the CLI reference page, generated from ``vjm_pin.cli.build_parser()``.
 
 Nothing is copied by hand: at every build the argparse parser is walked and ``cli.md`` is
-written from it (usage, description, one table of arguments per command, the epilog).
+written from it (usage, description, the top-level options and epilog — exit status,
+examples —, one table of arguments per command, its epilog).
 ``cli_markdown()`` is importable so that the tests can check the page against the parser.
 """
 
@@ -107,6 +108,15 @@ def cli_markdown() -> str:
         lines += ["| option | description |", "|---|---|"]
         lines += [f"| `{_cell(_signature(a))}` | {_cell(_help(a))} |" for a in top]
         lines.append("")
+    if parser.epilog:  # exit status and examples, as `vjm-pin --help` shows them
+        lines += [
+            "## Exit status and examples",
+            "",
+            "```text",
+            parser.epilog.strip("\n"),
+            "```",
+            "",
+        ]
     for name, sub in _subcommands(parser).items():
         lines += _command_section(name, sub, 2)
         for subname, subsub in _subcommands(sub).items():
