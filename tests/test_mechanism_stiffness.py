@@ -135,3 +135,21 @@ def test_verify_with_link_weights_and_moments_on_the_four_bar():
     assert check.ok
     assert np.allclose(check.task_reaction[[0, 2]], res.wrench[[0, 2]], rtol=1e-9, atol=1e-9)
     assert np.allclose(check.closure_multipliers, res.closure_multipliers, rtol=1e-9, atol=1e-9)
+
+
+def test_three_numbers_on_a_three_component_task_are_its_components():
+    """Task (x, z, ry): a wrench of 3 numbers is (fx, fz, my) in task order, never read as a
+    translation (which would put my into fz silently)."""
+    from vjm_pin.model.registry import models_dir
+    from vjm_pin.solver import MechanismSolver
+
+    text = (models_dir() / "four-bar.urdf").read_text().replace(
+        '<vjm:task frame="coupler_point" components="x z"', '<vjm:task frame="coupler_point" components="x z ry"'
+    )
+    vm = load_vjm(text)
+    assert vm.task == (0, 2, 4)
+    s = MechanismSolver(vm)
+    short = s.solve(wrench=[10.0, 0.0, 5.0])
+    full = s.solve(wrench=[10.0, 0.0, 0.0, 0.0, 5.0, 0.0])
+    np.testing.assert_array_equal(short.x, full.x)
+    assert short.wrench[4] == 5.0 and short.wrench[2] == 0.0
