@@ -44,3 +44,11 @@ def test_components_outside_the_task_are_refused_or_kept():
     assert v[1] == 1e-3
     # zero components outside the task are fine
     np.testing.assert_array_equal(task_vector([1.0, 0.0, 2.0], task=(0, 2)), [1, 0, 2, 0, 0, 0])
+
+
+def test_three_numbers_on_a_three_component_task_are_its_components():
+    # task (x, z, ry): (fx, fz, my), not a translation that would put my into fz
+    v = task_vector([10.0, 0.0, 5.0], task=(0, 2, 4), task_sized=True)
+    np.testing.assert_array_equal(v, [10.0, 0.0, 0.0, 0.0, 5.0, 0.0])
+    # the translational task reads the same either way
+    np.testing.assert_array_equal(task_vector([1.0, 2.0, 3.0], task=(0, 1, 2), task_sized=True), [1, 2, 3, 0, 0, 0])

@@ -34,7 +34,7 @@ def task_vector(
 
     Args:
         values: 6 numbers, 3 (translation; rotation zero) or, with ``task_sized``, one per
-            task component.
+            task component (this reading wins when the task has 3 components).
         task: Indices (0–5) of the task components, in order.
         name, unit: How the quantity is named in messages ("deflection", "m, rad").
         task_sized: Accept ``len(task)`` numbers as the task components.
@@ -52,11 +52,11 @@ def task_vector(
     task = tuple(int(i) for i in task)
     if a.size == 6:
         out = a.copy()
+    elif task_sized and a.size == len(task):  # before "3 = translation": a task (x, z, ry) reads
+        out = np.zeros(6)  # 3 numbers as its own components, never as a translation
+        out[list(task)] = a
     elif a.size == 3:
         out = np.concatenate([a, np.zeros(3)])
-    elif task_sized and a.size == len(task):
-        out = np.zeros(6)
-        out[list(task)] = a
     else:
         counts = ["3", "6"] + ([str(len(task))] if task_sized and len(task) not in (3, 6) else [])
         raise InputError(f"{name} must have {' or '.join(counts)} components ({unit}), got {a.size}")

@@ -495,19 +495,11 @@ class MechanismSolver:
         return tuple(c for c in self.task if c in out)
 
     def _vector6(self, v, name: str, unit: str) -> np.ndarray:
-        """6 numbers, or one per task component (in task order), or 3 (the translation) when
-        the task does not have 3 components: never 3 numbers read two ways
-        (:func:`~vjm_pin.model.task.task_vector`; components outside the task are checked by
-        the caller, which names held and loaded ones)."""
+        """6 numbers, one per task component (in task order) or 3 (the translation):
+        :func:`~vjm_pin.model.task.task_vector`; components outside the task are checked by the
+        caller, which names held and loaded ones."""
         from vjm_pin.model.task import task_vector
 
-        a = np.asarray(v, dtype=float).ravel() if not isinstance(v, str) else v
-        if getattr(a, "size", None) == 3 and len(self.task) == 3 and tuple(self.task) != (0, 1, 2):
-            out = np.zeros(6)  # the task's own three components, e.g. (x, z, ry)
-            out[list(self.task)] = a
-            if not np.all(np.isfinite(out)):
-                raise InputError(f"{name} contains NaN or infinite values: {a.tolist()}")
-            return out
         return task_vector(v, self.task, name, unit, task_sized=True, outside_task="keep")
 
     # ----------------------------------------------------------------- evaluation
