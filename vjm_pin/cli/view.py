@@ -1344,7 +1344,10 @@ def _map_from_args(args, loads):
         raise InputError(f"--map shows the robot at its reference: not with {', '.join(other)}")
     from vjm_pin.viz.map_cloud import read_map
 
-    return read_map(args.map)
+    try:
+        return read_map(args.map)
+    except InputError as e:
+        raise InputError(f"--map: {e}") from None
 
 
 def _run_map(args, vm, cloud) -> int:

@@ -65,16 +65,16 @@ def read_map(path) -> MapCloud:
     """
     p = Path(path)
     if p.suffix not in (".npz", ".csv"):
-        raise InputError(f"--map: a map file ends in .npz or .csv, got '{p.name}'")
+        raise InputError(f"a map file ends in .npz or .csv, got '{p.name}'")
     if not p.is_file():
-        raise InputError(f"--map: no such file '{p}'")
+        raise InputError(f"no such map file '{p}'")
     try:
         if p.suffix == ".npz":
             return _read_npz(p)
         return _read_csv(p)
     except (OSError, ValueError, KeyError, csv.Error) as e:
         msg = " ".join(str(e).split())
-        raise InputError(f"--map: '{p}' is not a map written by 'vjm-pin map --out' ({msg})") from None
+        raise InputError(f"'{p}' is not a map written by 'vjm-pin map --out' or run_map ({msg})") from None
 
 
 def _read_npz(p: Path) -> MapCloud:
@@ -119,12 +119,12 @@ def map_points(cloud: MapCloud, color_by: str = "k_min", size: float | None = No
     import matplotlib
 
     if color_by not in COLOR_BY:
-        raise InputError(f"--color-by must be one of {', '.join(COLOR_BY)}, got '{color_by}'")
+        raise InputError(f"color_by must be one of {', '.join(COLOR_BY)}, got '{color_by}'")
     label, unit, factor, log = COLOR_BY[color_by]
     vals = np.asarray(getattr(cloud, color_by), float)
     good = cloud.ok & np.isfinite(vals) & ((vals > 0) if log else True)
     if not np.all(np.isfinite(cloud.p0)):
-        raise InputError(f"--map: '{cloud.path}' has non-finite end positions p0")
+        raise InputError(f"map file '{cloud.path}' has non-finite end positions p0")
     cmap = matplotlib.colormaps["viridis"]
     colors = np.tile(np.array(NOT_SOLVED_COLOR[:3]), (len(vals), 1))
     legend = []

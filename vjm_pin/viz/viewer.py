@@ -2493,8 +2493,8 @@ def load_visuals(
         where = ", ".join(res.search_path) or "no folder"
         for name in res.missing:
             warnings.warn(
-                f"mesh '{name}' not found (searched {where}; add --package-dir or set "
-                "ROS_PACKAGE_PATH); the robot is drawn with primitives",
+                f"mesh '{name}' not found (searched {where}; pass its package folder in package_dirs "
+                "(CLI: --package-dir) or set ROS_PACKAGE_PATH); the robot is drawn with primitives",
                 stacklevel=2,
             )
         return MeshVisuals(None, tuple(res.missing))
