@@ -9,8 +9,15 @@ test that produced the output. :data:`JSON_VALIDATED` counts the validated objec
 from __future__ import annotations
 
 import collections
+import os
 
 import pytest
+
+# The solver's fused Newton kernel (vjm_pin.solver.kernel): its numpy twin for the whole suite, so
+# that no test's results depend on how many iterations earlier tests ran ("auto" switches to the
+# compiled kernel after JIT_AFTER_ITERATIONS; the two agree to rounding, not bit for bit).
+# tests/test_kernel.py selects the compiled kernel explicitly.
+os.environ.setdefault("VJM_PIN_JIT", "0")
 
 JSON_VALIDATED: collections.Counter = collections.Counter()
 

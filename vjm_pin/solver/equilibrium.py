@@ -85,6 +85,7 @@ from vjm_pin.exceptions import (
 )
 from vjm_pin.kinematics.chain import (
     Kinematics,
+    KinematicState,
     contract_hessian,
     deflection,
     displace,
@@ -146,6 +147,13 @@ VERIFY_RTOL = 1e-3
 VERIFY_STATICS = 1e-8
 #: Names of the six task components, in order.
 COMPONENTS = ("x", "y", "z", "rx", "ry", "rz")
+#: Private switch of the fused Newton kernel (:mod:`vjm_pin.solver.kernel`): False runs the
+#: unfused local iteration (``_fast_factor`` / ``_fast_step``; for the tests and the benchmark).
+_fused_enabled = True
+#: Placeholder factorisation arrays of a fused-kernel call that computes its own (one array type
+#: for the compiled kernel), then an empty Jacobian for a call that reuses a cached one.
+_KERNEL_DUMMY = (np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 0)), np.zeros(0), np.zeros(0), np.zeros(0),
+                 np.zeros((0, 0)), np.zeros(0), np.zeros((6, 0)))
 
 
 @dataclass(frozen=True)
@@ -364,6 +372,7 @@ class EquilibriumSolver:
         self._fast_max_iter = 8
         self._fast_cache: tuple[bytes, dict, StabilityResult | None] | None = None
         self._fast_fact: tuple | None = None  # factorisation at the last fast-path equilibrium
+        self._kpack: tuple | None = None  # constants of the fused kernel (_kernel_consts)
 
     def _sibling(self, **options) -> EquilibriumSolver:
         """A solver of the same model with the given options (the defaults of ``__init__``
@@ -455,6 +464,8 @@ class EquilibriumSolver:
         m, n = len(self.task), len(self.free)
         if m == 0 or m >= n:
             return None
+        if _fused_enabled and self._smask is not None and getattr(self.kin, "uses_screw", False):
+            return self._fast_newton_fused(x, p_t, r_t)
         tol = self.tol
         tol_p = tol * self.length_scale
         kscale = max(self.kscale, 1e-300)
@@ -473,7 +484,7 @@ class EquilibriumSolver:
         for it in range(self._fast_max_iter + 1 + POLISH_ITERATIONS):
             key = x.tobytes()
             fact = self._fast_fact
-            if fact is not None and fact[0] == key and fact[1] is self.kin:
+            if fact is not None and fact[0] == key and fact[1] is self.kin and len(fact) == 10:
                 # a warm start from the equilibrium this solver just found: its J, QR,
                 # multiplier and Hessian depend on x only (the target does not enter them)
                 st, jac, qf, rr, f, r, tau, hz = fact[2:]
@@ -515,6 +526,108 @@ class EquilibriumSolver:
             if dx is None:
                 return None
             x = self._moved(x, dx)
+            kkt_prev = kkt
+        return None
+
+    def _kernel_consts(self):
+        """The constant arrays of the fused kernel (:func:`vjm_pin.solver.kernel.pack`) and the
+        stability threshold, rebuilt when an option they hold changed (``_sibling``)."""
+        sig = (self.tol, self.follow_stable, self.max_step, self.kscale, id(self.kin))
+        kp = self._kpack
+        if kp is not None and kp[0] == sig:
+            return kp[1], kp[2]
+        from vjm_pin.solver import kernel
+
+        vm, n = self.vm, len(self.free)
+        kt = vm.K_theta
+        consts = kernel.pack(
+            free=self.free, theta_idx=vm.theta_idx, theta0=vm.theta0, task=self.task, kz=self._kz,
+            mask=self._smask, var_scale=self.var_scale, err_scale=self._err_scale, nq=vm.model.nq,
+            tol=self.tol, tol_p=self.tol * self.length_scale, kscale=max(self.kscale, 1e-300),
+            stat_floor=1e-6 * self.kscale, shift=SHIFT_TOL * self.kscale, max_step=self.max_step,
+            follow_stable=self.follow_stable, polish_step=POLISH_STEP, rank_tol=RANK_TOL,
+            big=n > SCIPY_LAPACK_MAX_N,
+        )
+        thr = float(STABILITY_TOL * (spectral_norm(kt) if kt.size else 1.0))
+        self._kpack = (sig, consts, thr)
+        return consts, thr
+
+    def _fast_newton_fused(self, x, p_t, r_t):
+        """:meth:`_fast_newton` for chains of 1-DoF joints (screw-form Hessian): per iteration one
+        Pinocchio call (frame Jacobian and end placement) and one call of the fused kernel
+        (:mod:`vjm_pin.solver.kernel`), with the same iterates, tests, caches and results."""
+        from vjm_pin.kinematics import chain
+        from vjm_pin.solver import kernel
+
+        kin, m, n = self.kin, len(self.task), len(self.free)
+        model, fid, data = kin.model, kin.frame_id, kin.data
+        step_fn = kernel.get()
+        consts, thr = self._kernel_consts()
+        pt = np.asarray(p_t, float)
+        rt = np.asarray(r_t, float)
+        consts = kernel.with_target(consts, pt)
+        rot = self._ir.size > 0
+        flush = bool(chain._flush_enabled)
+        lwa = pin.LOCAL_WORLD_ALIGNED
+        nv = model.nv
+        zero3 = np.zeros(3)
+        dummy = _KERNEL_DUMMY
+        kkt_prev = np.inf
+        polish = 0
+        x = flush_tiny(np.array(x, dtype=float))
+        for it in range(self._fast_max_iter + 1 + POLISH_ITERATIONS):
+            key = x.tobytes()
+            fact = self._fast_fact
+            if fact is not None and fact[0] == key and fact[1] is kin and fact[-1] is step_fn:
+                # a warm start from the equilibrium this solver just found (the target does not
+                # enter the factorisation; a factorisation by the other implementation is redone)
+                st = fact[2]
+                f6 = np.zeros(6)
+                f6[self._task_rows] = fact[6]
+                kf = tuple(fact[3:10]) + (f6,)
+                j6, pos, rotm, refactor = dummy[8], st.position, st.rotation, False
+            else:
+                j6 = pin.computeFrameJacobian(model, data, x, fid, lwa)
+                if j6.ndim != 2 or not j6.flags.c_contiguous:
+                    j6 = np.ascontiguousarray(j6).reshape(6, nv)
+                mo = data.oMf[fid]
+                pos, rotm = mo.translation, (mo.rotation if rot else None)
+                st, kf, refactor = None, dummy[:8], True
+            erot = pin.log3(rt @ rotm.T) if rot else zero3
+            status, kkt, ep, er, rs, kf, _, xn, ev = step_fn(
+                j6, pos, erot, x, refactor, polish < POLISH_ITERATIONS, flush, False, kf, consts
+            )
+            if status == kernel.FACTOR_FAIL:
+                return None
+            if status == kernel.POLISH:
+                polish += 1
+                x = xn
+                kkt_prev = np.inf
+                continue
+            if status == kernel.RANK_FAIL:
+                return None
+            if status == kernel.CONVERGED:
+                stab = StabilityResult(bool(ev.size == 0 or ev.max() < -thr), ev, n - m, thr)
+                if self.follow_stable and not stab.stable:
+                    self._fast_its = it
+                    return None
+                jac, qf, rr, f, r, tau, hz, f6 = kf
+                if st is None:
+                    st = KinematicState(pos.copy(), mo.rotation.copy(), j6, None)
+                    kin._last = (key, st)  # kin.evaluate(x, hessian=False) at this point: no Pinocchio call
+                res = {"position": float(ep), "orientation": float(er), "statics": float(rs)}
+                self._fast_cache = (key + f6.tobytes() + pt.tobytes() + rt.tobytes(), res, stab)
+                self._fast_fact = (key, kin, st, jac, qf, rr, f, r, tau, hz, step_fn)
+                nt, kt = self.nt, self.vm.K_theta
+                blocks = Blocks(jac[:, :nt], jac[:, nt:], hz[:nt, :nt], hz[:nt, nt:], hz[nt:, :nt], hz[nt:, nt:], kt, st)
+                remember_blocks(self.vm, kin, x, f6, blocks)
+                return x, f, it, st
+            self._fast_its = it
+            if it and not kkt < 0.5 * kkt_prev or it - polish >= self._fast_max_iter:
+                return None
+            if status != kernel.CONTINUE:
+                return None
+            x = xn
             kkt_prev = kkt
         return None
 
@@ -1059,7 +1172,7 @@ class EquilibriumSolver:
             p_t, r_t = _as_target(self.vm, self.kin, self.p0, self.r0, deflection, target)
             return run(p_t, r_t, x_start, f_start)
         d = self._vector6(deflection, "deflection", "m, rad")
-        _as_target(self.vm, self.kin, self.p0, self.r0, d, None)  # components outside the task
+        task_vector(d, self.vm.task, "deflection", "m, rad")  # components outside the task (as _as_target)
         return self._rotation_targets(d, self.task, run, x_start, f_start, raise_on_failure)
 
     def _escape(self, res, p_t, r_t, attempt_once) -> list[EquilibriumResult]:
@@ -1122,7 +1235,7 @@ class EquilibriumSolver:
             return self._result(x, f, total, True, st, p_t, r_t, label)
 
         def done(r):
-            return replace(r, iterations=total)
+            return r if r.iterations == total else replace(r, iterations=total)
 
         # A start where the end cannot move in some constrained direction (e.g. a straight
         # chain of rigid links) gives a singular eq. (28)/(10) matrix: perturb it first (§4.1).

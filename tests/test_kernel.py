@@ -1,0 +1,285 @@
+"""The fused Newton iteration (vjm_pin.solver.kernel): the compiled kernel against its numpy twin and
+both against the solver's unfused path (``_fast_factor`` / ``_fast_descent_step`` / ``_fast_step``),
+whole solves and a short curve with the compiled kernel on and off, the numpy fallback without
+numba, and the import policy (a one-shot run never imports numba).
+
+The first test that needs the compiled kernel compiles it (numba, cached on disk next to the
+module; later runs load it)."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from vjm_pin.kinematics.chain import Kinematics
+from vjm_pin.model.format import load_vjm
+from vjm_pin.model.paper_models import PAPER_BEAM, paper_model_urdf
+from vjm_pin.model.registry import resolve_model
+from vjm_pin.solver import equilibrium as eqmod
+from vjm_pin.solver import kernel
+from vjm_pin.solver.blocks import evaluate_blocks
+from vjm_pin.solver.equilibrium import EquilibriumSolver
+from vjm_pin.solver.stability import check_stability
+
+from .chains import random_vjm
+
+numba = pytest.importorskip("numba")
+
+
+def rel(a, b, scale=None):
+    s = max(np.abs(b).max() if scale is None else scale, 1e-300)
+    return np.abs(np.asarray(a) - np.asarray(b)).max() / s
+
+
+@pytest.fixture(scope="module")
+def compiled():
+    fn = kernel._load_compiled()
+    assert fn, "numba is installed: the compiled kernel must load"
+    return fn
+
+
+def _ur5_links():
+    pytest.importorskip("example_robot_data")
+    from vjm_pin.model.robots import build_robot
+
+    links = ("shoulder_link", "upper_arm_link", "forearm_link", "wrist_1_link", "wrist_2_link")
+    beam = {"section": "tube", "outer_diameter": 0.09, "wall": 0.005, "E": 7.0e10, "nu": 0.33}
+    return build_robot("ur5", springs={"links": {ln: {"beam": dict(beam)} for ln in links}}).vm
+
+
+CASES = {
+    "model-c": lambda: resolve_model("paper-c-s"),
+    "model-c-k2": lambda: load_vjm(paper_model_urdf("c", "s", beam=PAPER_BEAM, subdivide=2)),
+    "ur5-link-springs": _ur5_links,
+    "prismatic-6row": lambda: random_vjm(3, n_joints=6, n_passive=1, link_springs=2),
+    "prismatic-3row": lambda: random_vjm(4, n_joints=5, n_passive=2, link_springs=2, task=("x", "y", "z")),
+}
+
+
+def _points(vm, rng, s):
+    """(x, target position, target rotation) triples: near the reference (not converged: a descent
+    step) and an equilibrium under a small load with its own end pose (converged)."""
+    kin = s.kin
+    out = []
+    for amp in (1e-3, 2e-2):
+        x = vm.reference + rng.uniform(-amp, amp, vm.model.nq)
+        p, r = kin.placement(vm.reference + rng.uniform(-amp, amp, vm.model.nq))
+        out.append((x, p, r))
+    return out
+
+
+def _kernel_inputs(s, x, p_t, r_t):
+    st = Kinematics(s.vm.model, s.vm.frame_id).evaluate(x, hessian=False)
+    erot = pin.log3(r_t @ st.rotation.T) if s._ir.size else np.zeros(3)
+    consts, _ = s._kernel_consts()
+    return np.ascontiguousarray(st.jacobian), st.position.copy(), erot, kernel.with_target(consts, p_t)
+
+
+def _unfused(s, x, p_t, r_t):
+    """The solver's unfused quantities at x: (f, r, tau, hz, R, e, descent step, polish step, ev)."""
+    m, n = len(s.task), len(s.free)
+    big = n > eqmod.SCIPY_LAPACK_MAX_N
+    f6 = np.zeros(6)
+    st, jac, qf, rr, f, r, tau, hz = s._fast_factor(x, f6, np.zeros((n, n), order="F"), big)
+    y, z = qf[:, :m], qf[:, m:]
+    e, ep, er = s._fast_error(st, p_t, r_t)
+    s._ref_errors = (jac, e, ep, er)
+    dx = s._fast_descent_step(hz, y, z, rr, e, r, big)
+    step, red = s._fast_step(s._kz, hz, z, y, rr, e, r, big)
+    neg = -red
+    ev = np.linalg.eigvalsh(0.5 * (neg + neg.T))
+    return f, r, tau, hz, np.triu(rr[:, :m]), dx, step, ev, np.linalg.cond(red)
+
+
+def step_tol(cond):
+    """Rounding differences of a step solved with ZᵀWZ grow with its condition number: 1e-12
+    relative, or 1e-15·cond(ZᵀWZ) at the (random, ill-conditioned) points where that is larger."""
+    return max(1e-12, 1e-15 * cond)
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_fused_iteration_matches_unfused_path(case, compiled):
+    """One iteration: multiplier, residual, ∇E, screw Hessian, R, descent / polish steps, new
+    iterate and the eigenvalues of eq. (23): compiled = numpy twin = unfused path (1e-12 relative)."""
+    vm = CASES[case]()
+    rng = np.random.default_rng(sum(map(ord, case)))
+    for follow in (True, False):
+        s = EquilibriumSolver(vm, follow_stable=follow)
+        for x, p_t, r_t in _points(vm, rng, s):
+            f, r, tau, hz, rr, dx_ref, _, _, cond = _unfused(s, x, p_t, r_t)
+            jac_ref, e_ref, ep_ref, er_ref = s._ref_errors
+            kkt_ref = np.linalg.norm(e_ref / s._err_scale) + np.linalg.norm(r) / s.kscale
+            j6, pos, erot, consts = _kernel_inputs(s, x, p_t, r_t)
+            dummy = eqmod._KERNEL_DUMMY[:8]
+            outs = {}
+            for name, fn in (("numpy", kernel.iterate_numpy), ("compiled", compiled)):
+                outs[name] = (fn(j6, pos, erot, x, True, False, True, True, dummy, consts),
+                              fn(j6, pos, erot, x, True, True, True, True, dummy, consts))
+            tscale = max(np.abs(tau).max(), 1e-6 * s.kscale)
+            for name, (a, _) in outs.items():
+                status, kkt, ep, er, rs, fact, dx, xn, _ = a
+                jac, _, rk, fk, rk_res, tauk, hzk, f6 = fact
+                np.testing.assert_array_equal(jac, jac_ref)
+                assert ep == ep_ref and er == er_ref, (name, "task error")
+                assert abs(rs - np.abs(r).max()) <= 1e-12 * tscale, (name, "max residual")
+                assert abs(kkt - kkt_ref) <= 1e-12 * kkt_ref, (name, "KKT norm")
+                assert rel(fk, f) < 1e-12, (name, "multiplier")
+                assert rel(rk_res, r, tscale) < 1e-12, (name, "residual")
+                assert rel(tauk, tau, tscale) < 1e-12, (name, "grad E")
+                assert rel(hzk, hz) < 1e-12, (name, "screw Hessian")
+                assert rel(np.triu(rk), rr) < 1e-12, (name, "R")
+                np.testing.assert_array_equal(f6[s.task], fk)
+                assert status in (kernel.CONTINUE, kernel.STEP_FAIL), (name, status)  # none converged
+                if dx_ref is None:
+                    assert status == kernel.STEP_FAIL, name
+                else:
+                    assert status == kernel.CONTINUE, name
+                    assert rel(dx, dx_ref) < step_tol(cond), (name, "descent step")
+                    moved = x.copy()
+                    moved[s.free] += dx
+                    np.testing.assert_array_equal(xn, moved)  # nothing tiny to flush here
+            # the same iteration with the numpy fallback and compiled: same verdicts
+            assert outs["numpy"][0][0] == outs["compiled"][0][0]
+            assert abs(outs["numpy"][0][1] - outs["compiled"][0][1]) <= 1e-12 * outs["numpy"][0][1]
+            # polish flag without convergence: still the descent step
+            assert outs["compiled"][1][0] == outs["compiled"][0][0]
+            # at its own end pose with a loose residual test the point counts as converged: the
+            # unmodified (polish) step and, without polish, eq. (23)
+            st = Kinematics(vm.model, vm.frame_id).evaluate(x, hessian=False)
+            loose = s._sibling(tol=1e-4, follow_stable=follow)
+            loose.kscale = s.kscale * 1e12
+            _, _, _, _, _, _, step_c, ev_c, cond_c = _unfused(loose, x, st.position, st.rotation)
+            j6c, posc, erotc, cc = _kernel_inputs(loose, x, st.position, st.rotation)
+            for fn in (kernel.iterate_numpy, compiled):
+                a = fn(j6c, posc, erotc, x, True, False, True, False, dummy, cc)
+                assert a[0] in (kernel.CONVERGED, kernel.RANK_FAIL)
+                if a[0] == kernel.CONVERGED:
+                    assert rel(a[8], ev_c) < 1e-12, "eq. (23) eigenvalues"
+                b = fn(j6c, posc, erotc, x, True, True, True, True, dummy, cc)
+                if step_c is not None and np.abs(step_c / s.var_scale).max() > eqmod.POLISH_STEP:
+                    assert b[0] == kernel.POLISH
+                    assert rel(b[6], step_c) < step_tol(cond_c), "polish step"
+
+
+def _column_solves(vm, direction, span, n):
+    s = EquilibriumSolver(vm)
+    prev, out = None, []
+    for t in np.linspace(span / n, span, n):
+        r = s.solve(t * direction, x0=None if prev is None else prev.x, wrench0=None if prev is None else prev.wrench)
+        out.append(r)
+        prev = r
+    return s, out
+
+
+def _with_jit(monkeypatch, value, fn):
+    monkeypatch.setenv("VJM_PIN_JIT", value)
+    try:
+        return fn()
+    finally:
+        monkeypatch.delenv("VJM_PIN_JIT")
+
+
+@pytest.mark.parametrize("case", ["model-c", "ur5-link-springs", "prismatic-6row"])
+def test_whole_solves_agree_with_and_without_jit_and_unfused(case, compiled, monkeypatch):
+    """Warm-started solves (Model C past buckling): compiled, numpy twin and the unfused path give the
+    same equilibria, wrenches, paths and verdicts (1e-10); the Blocks the solver remembers are
+    those evaluated afresh."""
+    vm = CASES[case]()
+    if case == "model-c":
+        direction, span = np.array([-1.0, 0, 0, 0, 0, 0]), 6e-5
+    elif case == "ur5-link-springs":
+        direction, span = np.array([0, 0, -1.0, 0, 0, 0]), 1e-3
+    else:
+        direction, span = np.array([1.0, -0.5, 0.3, 0, 0, 0]) * 1e-2, 1.0
+    runs = {
+        "compiled": lambda: _with_jit(monkeypatch, "1", lambda: _column_solves(vm, direction, span, 10)),
+        "numpy": lambda: _with_jit(monkeypatch, "0", lambda: _column_solves(vm, direction, span, 10)),
+    }
+    got = {k: f() for k, f in runs.items()}
+    monkeypatch.setattr(eqmod, "_fused_enabled", False)
+    got["unfused"] = _column_solves(vm, direction, span, 10)
+    monkeypatch.setattr(eqmod, "_fused_enabled", True)
+    ref = got["unfused"][1]
+    for name in ("compiled", "numpy"):
+        s, res = got[name]
+        for a, b in zip(res, ref):
+            assert a.converged and b.converged and a.stable == b.stable and a.path == b.path, name
+            assert a.iterations == b.iterations, name
+            assert rel(a.wrench, b.wrench) < 1e-10, name
+            assert np.abs(a.x - b.x).max() < 1e-10, name
+            assert rel(a.stability.eigenvalues, b.stability.eigenvalues) < 1e-10, name
+            for k in ("position", "orientation", "statics"):
+                assert abs(a.residuals[k] - b.residuals[k]) <= 1e-10 * max(abs(b.residuals[k]), 1e-300) or (
+                    abs(a.residuals[k] - b.residuals[k]) < 1e-15 * max(s.kscale, 1.0)), (name, k)
+        # the remembered Blocks and verdict at the last point = fresh ones (a new Kinematics)
+        last = res[-1]
+        cached = evaluate_blocks(vm, s.kin, last.x, last.wrench)
+        fresh = evaluate_blocks(vm, Kinematics(vm.model, vm.frame_id), last.x, last.wrench)
+        for attr in ("J_theta", "J_q", "H_tt", "H_tq", "H_qt", "H_qq"):
+            if getattr(fresh, attr).size:
+                assert rel(getattr(cached, attr), getattr(fresh, attr)) < 1e-12, (name, attr)
+        assert rel(check_stability(fresh).eigenvalues, last.stability.eigenvalues) < 1e-10, name
+
+
+def test_short_curve_agrees_with_and_without_jit(compiled, monkeypatch):
+    from vjm_pin.analysis.curve import trace_curve
+
+    vm = resolve_model("paper-c-s")
+    direction = np.array([-1.0, 0, 0, 0, 0, 0])
+
+    def curve():
+        return trace_curve(vm, direction, 8e-5, steps=12)
+
+    a = _with_jit(monkeypatch, "1", curve)
+    b = _with_jit(monkeypatch, "0", curve)
+    fa, fb = np.array([p.force for p in a.points]), np.array([p.force for p in b.points])
+    assert fa.shape == fb.shape and len(fa) >= 12
+    assert rel(fa, fb) < 1e-10
+    assert [p.stable for p in a.points] == [p.stable for p in b.points]
+    assert len(a.critical) == len(b.critical)
+    for ca, cb in zip(a.critical, b.critical):
+        assert abs(ca.force - cb.force) <= 1e-10 * abs(cb.force)
+
+
+def test_fallback_without_numba(monkeypatch):
+    """numba not importable: the kernel is the numpy twin even when asked for, and solves run."""
+    monkeypatch.setattr(kernel, "_compiled", None)
+    monkeypatch.setitem(sys.modules, "numba", None)  # import numba -> ImportError
+    monkeypatch.setenv("VJM_PIN_JIT", "1")
+    assert kernel.get() is kernel.iterate_numpy
+    assert kernel.load() is False
+    vm = resolve_model("paper-c-s")
+    r = EquilibriumSolver(vm).solve(np.array([-2e-5, 0, 0, 0, 0, 0]))
+    assert r.converged and r.stable
+    assert r.residuals["statics"] <= 1e-10 * np.abs(r.wrench).max() * 10
+
+
+def test_import_policy(compiled, monkeypatch):
+    """VJM_PIN_JIT=0 always numpy; auto: numpy until JIT_AFTER_ITERATIONS numpy iterations ran, or
+    once loaded; =1 compiled."""
+    monkeypatch.setenv("VJM_PIN_JIT", "0")
+    assert kernel.get() is kernel.iterate_numpy
+    monkeypatch.setenv("VJM_PIN_JIT", "1")
+    assert kernel.get() is compiled
+    monkeypatch.delenv("VJM_PIN_JIT")
+    monkeypatch.setattr(kernel, "_compiled", None)
+    monkeypatch.setattr(kernel, "_numpy_iterations", 0)
+    assert kernel.get() is kernel.iterate_numpy
+    monkeypatch.setattr(kernel, "_numpy_iterations", kernel.JIT_AFTER_ITERATIONS)
+    assert kernel.get() not in (None, kernel.iterate_numpy)  # loads it (from numba's cache)
+    assert kernel.loaded()
+
+
+def test_one_shot_run_does_not_import_numba():
+    code = (
+        "import sys\n"
+        "from vjm_pin.cli import main\n"
+        "rc = main(['analyze', 'paper-c-s', '--deflection', '-0.00002', '0', '0'])\n"
+        "assert rc == 0, rc\n"
+        "assert 'numba' not in sys.modules, 'numba imported by a one-shot analyze'\n"
+    )
+    env = {k: v for k, v in __import__("os").environ.items() if k != "VJM_PIN_JIT"}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, env=env, check=False)
+    assert out.returncode == 0, out.stderr[-2000:]

@@ -1,0 +1,642 @@
+"""The fused Newton iteration of the serial solver's local path (issue 14).
+
+One call does everything of one iteration of
+:meth:`~vjm_pin.solver.equilibrium.EquilibriumSolver._fast_newton` after the Pinocchio call
+(frame Jacobian ``J`` and end placement at ``x``):
+
+1. gather of the free columns (θ, q order) and task rows of ``J``;
+2. ``∇E = K_θ(θ − θ₀)`` (0 for the passive coordinates q);
+3. complete Householder QR ``Jᵀ = [Y Z] [R; 0]`` (LAPACK ``dlarfg`` convention: ``Z`` is the
+   explicit null-space basis of eq. 20–21, the same basis as ``dgeqrf`` + ``dorgqr``);
+4. the least-squares multiplier ``F = R⁻¹ Yᵀ ∇E`` and the static residual ``r = ∇E − JᵀF``
+   (eq. 5);
+5. the Hessian of Ψ (eq. 16) in screw form from ``J`` (:mod:`vjm_pin.kinematics.screw`);
+6. the task error and the convergence test of the solver (position ≤ 0.01·tol·L_c,
+   orientation ≤ 0.01·tol, statics ≤ tol·max(|∇E|, 1e-6·max|K_θ|)) and the KKT norm;
+7. away from convergence the Newton step of eq. (28) in null-space form, ``Rᵀ p_Y = e``,
+   ``(ZᵀWZ) p_Z = −Zᵀ(r + W Y p_Y)``, ``W = K − H(F)``, with the ``follow_stable`` test
+   (``½(ZᵀWZ + (ZᵀWZ)ᵀ) − shift·I`` positive definite: Cholesky) and the step limit;
+   at convergence the unmodified (polish) step, and once that is negligible the rank test
+   of ``J`` and the eigenvalues of eq. (23), ``−½(ZᵀWZ + (ZᵀWZ)ᵀ)`` (stability verdict),
+   from the same reduced matrix;
+8. the update ``x⁺ = x + δx`` with entries below 1e-150 flushed to zero
+   (:func:`~vjm_pin.kinematics.chain.flush_tiny`).
+
+Two implementations of the same contract: :func:`iterate_numpy` (vectorised numpy and scipy's
+LAPACK, the fallback, exactly the arithmetic of the solver's unfused path) and the compiled
+:func:`_iterate_loops` (numba ``@njit(cache=True)``: explicit loops; no explicit ``Q``, the
+Householder reflectors are applied where it would multiply, so ``ZᵀWZ`` costs ``4mn²`` flops
+instead of ``2n²(n − m)``; own Cholesky and LU; LAPACK ``dsyevd``/``dgesdd`` through numba's
+``np.linalg`` for the eigenvalues and singular values of the verdict). They agree to rounding
+(``tests/test_kernel.py``; a step differs by ~1e-15·cond(ZᵀWZ) relative).
+
+Why numba (and not C++ through Pinocchio's CasADi/CppAD code generation or a C extension):
+it needs no compiler at install time (the wheel has LLVM inside), the fallback is the same
+algorithm in plain numpy so the package works where numba does not (``VJM_PIN_JIT=0``, or
+numba missing), and ``cache=True`` stores the machine code next to this file so only the
+first run on a machine compiles (65–90 s measured on the loaded 2-core test machine); later
+processes load it (numba's import and its target initialisation: ~1–2 s per process).
+Pinocchio itself cannot be called from compiled code, so one Python-level Pinocchio call per
+iteration remains; the kernel removes the ~80 small numpy/LAPACK calls around it.
+
+Import policy (:func:`get`): numba is imported lazily, never at package import. ``VJM_PIN_JIT``
+= ``0``: the numpy twin always; ``1``: compiled from the first solve; unset or ``auto``: the numpy
+twin until the process has run :data:`JIT_AFTER_ITERATIONS` fused iterations (a long curve, a
+map) or a caller asked for the compiled kernel (:func:`load`), compiled from then on. The rule
+is by work done, not by "second solve": loading numba and the cached machine code costs
+~1–2 s per process, which a compiled iteration (0.1–0.5 ms cheaper) repays only after
+thousands of iterations; a one-shot ``vjm-pin analyze`` or a short curve never imports numba.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+import numpy as np
+
+#: Status codes returned by an iteration.
+CONTINUE = 0  #: not converged; ``dx``/``xn`` hold the descent step
+POLISH = 1  #: converged, the unmodified step is not negligible: ``dx``/``xn`` hold it
+CONVERGED = 2  #: converged and polished: ``ev`` holds the eigenvalues of eq. (23), rank test passed
+FACTOR_FAIL = -1  #: a triangular factor is exactly singular (the iteration cannot go on)
+STEP_FAIL = -2  #: not converged and no acceptable descent step (not PD, singular, too long)
+RANK_FAIL = -3  #: converged but ``J`` is rank deficient (RANK_TOL)
+
+#: Order of the scalar constants in ``cf`` (see :func:`pack`).
+_CF = ("tol", "tol_p", "kscale", "stat_floor", "shift", "max_step", "follow_stable", "polish_step", "rank_tol",
+       "pt0", "pt1", "pt2", "big")
+
+_compiled = None  # the compiled iteration once loaded, False when numba is unavailable
+_built = None  # the compiled iteration once built in this process
+
+
+def pack(*, free, theta_idx, theta0, task, kz, mask, var_scale, err_scale, nq, tol, tol_p, kscale, stat_floor,
+         shift, max_step, follow_stable, polish_step, rank_tol, big):
+    """The solver's constant arrays in the layout both implementations take:
+    ``(ci, cf, kz, mask, theta0, var_scale, err_scale)``; ``cf``'s target position slots are
+    filled per solve by :func:`with_target`."""
+    free = np.asarray(free, np.int64)
+    theta_idx = np.asarray(theta_idx, np.int64)
+    task = np.asarray(task, np.int64)
+    ip = np.array([i for i, t in enumerate(task) if t < 3], np.int64)
+    ir = np.array([i for i, t in enumerate(task) if t >= 3], np.int64)
+    head = np.array([len(free), len(theta_idx), len(task), len(ip), len(ir), int(nq)], np.int64)
+    ci = np.concatenate([head, free, theta_idx, task, ip, ir]).astype(np.int64)
+    cf = np.array([tol, tol_p, kscale, stat_floor, shift, max_step, float(bool(follow_stable)), polish_step, rank_tol,
+                   0.0, 0.0, 0.0, float(bool(big))], float)
+    return (ci, cf, np.ascontiguousarray(kz, float), np.ascontiguousarray(mask, bool),
+            np.ascontiguousarray(theta0, float), np.ascontiguousarray(var_scale, float),
+            np.ascontiguousarray(err_scale, float))
+
+
+def with_target(consts, pt):
+    """``consts`` with the target position ``pt`` (3,) in ``cf``."""
+    cf = consts[1].copy()
+    cf[9:12] = pt
+    return (consts[0], cf) + tuple(consts[2:])
+
+
+def _unpack_ci(ci):
+    n, nt, m, nip, nir, nq = ci[0], ci[1], ci[2], ci[3], ci[4], ci[5]
+    o = 6
+    free = ci[o:o + n]
+    o += n
+    theta_idx = ci[o:o + nt]
+    o += nt
+    task = ci[o:o + m]
+    o += m
+    ip = ci[o:o + nip]
+    o += nip
+    ir = ci[o:o + nir]
+    return n, nt, m, nq, free, theta_idx, task, ip, ir
+
+
+# --------------------------------------------------------------------------- numpy fallback
+def iterate_numpy(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, consts):
+    """One fused iteration in numpy (the fallback; the arithmetic of the unfused solver path).
+
+    Args:
+        J6: (6, nv) ``LOCAL_WORLD_ALIGNED`` frame Jacobian at ``x`` (ignored if not ``refactor``).
+        pos: (3,) end position at ``x``; erot: (3,) ``log3(R* Rᵀ)`` (zeros without rotation rows).
+        x: (nq,) configuration.
+        refactor: compute the factorisation at ``x`` (else reuse ``fact``, computed at ``x``).
+        polish_left: at convergence, take the polish step (else go to the verdict directly).
+        flush: flush |x| < 1e-150 to zero in the update.
+        keep: return the factorisation whatever the status (else only when CONVERGED: the
+            compiled twin then returns the input ``fact`` in its place, and input arrays in the
+            other unused slots).
+        fact: ``(jac, qf, rr, f, r, tau, hz, f6)`` when not ``refactor`` (else anything).
+        consts: from :func:`pack` / :func:`with_target`.
+
+    Returns:
+        ``(status, kkt, ep, er, rs, fact, dx, xn, ev)``; ``fact`` the factorisation at ``x``
+        (``jac`` (m, n) task rows/free columns, ``qf`` = [Y Z] (n, n) — the compiled twin holds
+        the Householder reflectors there instead, so a ``fact`` is only passed back to the
+        implementation that made it —, ``rr`` R (m, m, upper triangle meaningful), ``f`` (m,), ``r``, ``tau`` (n,), ``hz`` (n, n) Hessian of Ψ,
+        ``f6`` (6,)); ``dx`` (n,) and ``xn`` (nq,) the step and new iterate (status
+        CONTINUE/POLISH); ``ev`` the eigenvalues of eq. (23) (status CONVERGED).
+    """
+    from vjm_pin.kinematics.screw import psi_hessian_screw
+    from vjm_pin.solver.lapack import lapack as _lapack
+
+    global _numpy_iterations
+    _numpy_iterations += 1  # auto mode's switch to the compiled kernel (get)
+    ci, cf, kz, mask, theta0, vscale, escale = consts
+    n, nt, m, _, free, theta_idx, task, ip, ir = _unpack_ci(ci)
+    tol, tol_p, kscale, stat_floor, shift, max_step = cf[:6]
+    follow, polish_step, rank_tol, pt, big = cf[6] != 0.0, cf[7], cf[8], cf[9:12], cf[12] != 0.0
+    empty = np.zeros(0)
+    if refactor:
+        jfree = J6.take(free, axis=1)
+        jac = jfree.take(task, axis=0)
+        tau = np.zeros(n)
+        tau[:nt] = kz[:nt, :nt] @ (x.take(theta_idx) - theta0)
+        if big:
+            qf, rf = np.linalg.qr(jac.T, mode="complete")
+            rr, info, info2 = rf[:m], 0, 0
+        else:
+            qr, tq, _, info = _lapack.dgeqrf(jac.T)
+            qfull = np.zeros((n, n), order="F")
+            qfull[:, :m] = qr
+            qf, _, info2 = _lapack.dorgqr(qfull, tq)
+            rr = qr[:m]
+        if info or info2:
+            return FACTOR_FAIL, 0.0, 0.0, 0.0, 0.0, None, empty, empty, empty
+        f, info = _lapack.dtrtrs(rr, qf[:, :m].T @ tau)
+        if info:
+            return FACTOR_FAIL, 0.0, 0.0, 0.0, 0.0, None, empty, empty, empty
+        r = tau - jac.T @ f
+        f6 = np.zeros(6)
+        f6[task] = f
+        hz = psi_hessian_screw(jfree, f6, mask)
+        fact = (jac, qf, rr, f, r, tau, hz, f6)
+    else:
+        jac, qf, rr, f, r, tau, hz, f6 = fact
+    y, z = qf[:, :m], qf[:, m:]
+    e = np.concatenate([pt - pos, erot]).take(task)
+    ae = np.abs(e)
+    ep = ae[ip].max() if ip.size else 0.0
+    er = ae[ir].max() if ir.size else 0.0
+    rs = np.abs(r).max()
+    es = e / escale
+    kkt = math.sqrt(es @ es) + math.sqrt(r @ r) / kscale
+    converged = ep <= 0.01 * tol_p and er <= 0.01 * tol and rs <= tol * max(np.abs(tau).max(), stat_floor)
+    w = kz - hz
+    red = z.T @ w @ z
+    if not converged:
+        if follow:  # ½(red + redᵀ) − shift·I ≻ 0
+            sym = red + red.T
+            sym.flat[np.arange(n - m) * (n - m + 1)] -= 2.0 * shift
+            if big:
+                try:
+                    np.linalg.cholesky(sym)
+                except np.linalg.LinAlgError:
+                    return STEP_FAIL, kkt, ep, er, rs, fact, empty, empty, empty
+            elif _lapack.dpotrf(sym, overwrite_a=1)[1]:
+                return STEP_FAIL, kkt, ep, er, rs, fact, empty, empty, empty
+        dx = _null_space_step(w, red, y, z, rr, e, r, big, _lapack)
+        if dx is None:
+            return STEP_FAIL, kkt, ep, er, rs, fact, empty, empty, empty
+        smax = np.abs(dx / vscale).max()
+        if not smax <= max_step:  # also catches NaN
+            return STEP_FAIL, kkt, ep, er, rs, fact, empty, empty, empty
+        return CONTINUE, kkt, ep, er, rs, fact, dx, _moved(x, free, dx, flush), empty
+    if polish_left:
+        dx = _null_space_step(w, red, y, z, rr, e, r, big, _lapack)
+        if dx is not None and np.all(np.isfinite(dx)) and np.abs(dx / vscale).max() > polish_step:
+            return POLISH, kkt, ep, er, rs, fact, dx, _moved(x, free, dx, flush), empty
+    _, sv, _, info = _lapack.dgesdd(np.triu(rr[:, :m]), compute_uv=0)
+    if info or not sv[-1] > rank_tol * sv[0]:  # descending
+        return RANK_FAIL, kkt, ep, er, rs, fact, empty, empty, empty
+    neg = -red
+    if big:
+        ev = np.linalg.eigvalsh(0.5 * (neg + neg.T))
+    else:
+        ev, _, info = _lapack.dsyevd(0.5 * (neg + neg.T), compute_v=0)
+        if info:
+            return RANK_FAIL, kkt, ep, er, rs, fact, empty, empty, empty
+    return CONVERGED, kkt, ep, er, rs, fact, empty, empty, ev
+
+
+def _null_space_step(w, red, y, z, rr, e, r, big, _lapack):
+    """``δx = Y p_Y − Z p_Z`` with ``Rᵀ p_Y = e``, ``(ZᵀWZ) p_Z = Zᵀ(r + W Y p_Y)``; None if singular."""
+    py, info = _lapack.dtrtrs(rr, e, trans=1)
+    if info:
+        return None
+    dy = y @ py
+    rhs = z.T @ (r + w @ dy)
+    if big:
+        try:
+            pz = np.linalg.solve(red, rhs)
+        except np.linalg.LinAlgError:
+            return None
+    else:
+        _, _, pz, info = _lapack.dgesv(red, rhs)
+        if info:
+            return None
+    return dy - z @ pz
+
+
+def _moved(x, free, dx, flush):
+    xn = x.copy()
+    xn[free] += dx
+    if flush:
+        xn[np.abs(xn) < 1e-150] = 0.0
+    return xn
+
+
+# --------------------------------------------------------------------------- compiled kernel
+def _iterate_loops(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, ci, cf, kz, mask, theta0, vscale, escale):
+    """The compiled twin of :func:`iterate_numpy` (same contract; ``consts`` passed unpacked).
+
+    Plain loops (numba) and no explicit ``Q``: the reflectors ``H_k = I − τ_k v_k v_kᵀ`` of the QR
+    are kept (``fact[1]``: rows ``v_k``, last row ``τ``) and applied where ``Q`` would multiply,
+    ``Qᵀ W Q`` on both sides (``4 m n²`` flops instead of ``2 n² (n − m)``; its trailing block is
+    ``ZᵀWZ``); own Cholesky and partially pivoted LU (``dpotrf`` / ``dgesv`` semantics: failure on
+    a non-positive / an exactly zero pivot); numba's ``np.linalg.svd`` / ``eigvalsh`` (LAPACK)
+    for the verdict."""
+    n, nt, m, nip, nir = ci[0], ci[1], ci[2], ci[3], ci[4]
+    free = ci[6:6 + n]
+    theta_idx = ci[6 + n:6 + n + nt]
+    task = ci[6 + n + nt:6 + n + nt + m]
+    ip = ci[6 + n + nt + m:6 + n + nt + m + nip]
+    ir = ci[6 + n + nt + m + nip:6 + n + nt + m + nip + nir]
+    tol, tol_p, kscale, stat_floor, shift, max_step = cf[0], cf[1], cf[2], cf[3], cf[4], cf[5]
+    follow, polish_step, rank_tol = cf[6] != 0.0, cf[7], cf[8]
+    nz = n - m
+    # unused result slots hold input arrays (no new array to box: numba boxes a new array
+    # through a pickled dtype, ~µs each); the factorisation is returned when kept or converged
+    fact_in = fact
+    empty = fact_in[3]
+    if refactor:
+        jfree = np.empty((6, n))
+        for a_ in range(6):
+            for b in range(n):
+                jfree[a_, b] = J6[a_, free[b]]
+        jac = np.empty((m, n))
+        for i in range(m):
+            jac[i, :] = jfree[task[i], :]
+        tau = np.zeros(n)
+        for i in range(nt):
+            s = 0.0
+            for j in range(nt):
+                s += kz[i, j] * (x[theta_idx[j]] - theta0[j])
+            tau[i] = s
+        # Householder QR of Jᵀ (n × m), dgeqr2 / dlarfg: row k of ``hh`` is column k of Jᵀ, then
+        # the reflector v_k (v_k[k] = 1 implicit, entries < k unused); hh[m, k] = τ_k
+        hh = np.zeros((m + 1, n))
+        hh[:m, :] = jac
+        for k in range(m):
+            alpha = hh[k, k]
+            xn2 = 0.0
+            for i in range(k + 1, n):
+                xn2 += hh[k, i] * hh[k, i]
+            xnorm = math.sqrt(xn2)
+            if xnorm == 0.0:
+                hh[m, k] = 0.0
+            else:
+                beta = -math.copysign(math.hypot(alpha, xnorm), alpha)
+                t = (beta - alpha) / beta
+                hh[m, k] = t
+                scal = 1.0 / (alpha - beta)
+                for i in range(k + 1, n):
+                    hh[k, i] *= scal
+                hh[k, k] = beta
+                for j in range(k + 1, m):  # apply H_k to the remaining columns of Jᵀ
+                    s = hh[j, k]
+                    for i in range(k + 1, n):
+                        s += hh[j, i] * hh[k, i]
+                    s *= t
+                    hh[j, k] -= s
+                    for i in range(k + 1, n):
+                        hh[j, i] -= s * hh[k, i]
+        rr = np.zeros((m, m))
+        for i in range(m):
+            for j in range(i, m):
+                rr[i, j] = hh[j, i]
+        # multiplier: R F = Yᵀ ∇E = (Qᵀ ∇E)[:m]
+        qt = _apply_qt(hh, tau, m, n)
+        f = np.zeros(m)
+        for i in range(m):
+            if rr[i, i] == 0.0:
+                return FACTOR_FAIL, 0.0, 0.0, 0.0, 0.0, fact, empty, empty, empty
+        for i in range(m - 1, -1, -1):
+            s = qt[i]
+            for j in range(i + 1, m):
+                s -= rr[i, j] * f[j]
+            f[i] = s / rr[i, i]
+        r = tau.copy()
+        for c in range(n):
+            s = 0.0
+            for i in range(m):
+                s += jac[i, c] * f[i]
+            r[c] -= s
+        f6 = np.zeros(6)
+        for i in range(m):
+            f6[task[i]] = f[i]
+        # Hessian of Ψ in screw form (kinematics/screw.py)
+        fx, fy, fz, mx, my, mz = f6[0], f6[1], f6[2], f6[3], f6[4], f6[5]
+        d = np.empty((3, n))
+        em = np.empty((3, n))
+        for b in range(n):
+            v0, v1, v2 = jfree[0, b], jfree[1, b], jfree[2, b]
+            w0, w1, w2 = jfree[3, b], jfree[4, b], jfree[5, b]
+            d[0, b] = fz * v1 - fy * v2
+            d[1, b] = -fz * v0 + fx * v2
+            d[2, b] = fy * v0 - fx * v1
+            em[0, b] = mz * w1 - my * w2
+            em[1, b] = -mz * w0 + mx * w2
+            em[2, b] = my * w0 - mx * w1
+        hz = np.empty((n, n))
+        for i in range(n):
+            for j in range(n):
+                if mask[i, j]:
+                    hz[i, j] = (jfree[3, j] * d[0, i] + jfree[4, j] * d[1, i] + jfree[5, j] * d[2, i]
+                                + (em[0, i] * jfree[3, j] + em[1, i] * jfree[4, j] + em[2, i] * jfree[5, j]))
+                else:
+                    hz[i, j] = jfree[3, i] * d[0, j] + jfree[4, i] * d[1, j] + jfree[5, i] * d[2, j]
+        fact = (jac, hh, rr, f, r, tau, hz, f6)
+    jac, hh, rr, f, r, tau, hz, f6 = fact
+    # task error and convergence quantities
+    e = np.empty(m)
+    for i in range(m):
+        t_ = task[i]
+        e[i] = cf[9 + t_] - pos[t_] if t_ < 3 else erot[t_ - 3]
+    ep = 0.0
+    for i in ip:
+        ep = max(ep, abs(e[i]))
+    er = 0.0
+    for i in ir:
+        er = max(er, abs(e[i]))
+    rs = 0.0
+    r2 = 0.0
+    taumax = 0.0
+    for c in range(n):
+        rs = max(rs, abs(r[c]))
+        r2 += r[c] * r[c]
+        taumax = max(taumax, abs(tau[c]))
+    es2 = 0.0
+    for i in range(m):
+        es2 += (e[i] / escale[i]) ** 2
+    kkt = math.sqrt(es2) + math.sqrt(r2) / kscale
+    converged = ep <= 0.01 * tol_p and er <= 0.01 * tol and rs <= tol * max(taumax, stat_floor)
+    # Qᵀ W Q, W = K − H: its trailing block is ZᵀWZ, its block [m:, :m] is ZᵀWY. Both sides as
+    # left applications of the reflectors (row operations: contiguous, vectorisable loops):
+    # A = Qᵀ W, then Qᵀ Aᵀ = (Qᵀ W Q)ᵀ
+    wq = kz - hz
+    _reflect_rows(hh, wq, m, n)
+    wt = np.ascontiguousarray(wq.T)
+    _reflect_rows(hh, wt, m, n)
+    wq = np.ascontiguousarray(wt.T)
+    if not converged:
+        if follow:  # Cholesky of (red + redᵀ) − 2·shift·I, red = ZᵀWZ
+            lo = np.zeros((nz, nz))
+            for j in range(nz):
+                s = wq[m + j, m + j] + wq[m + j, m + j] - 2.0 * shift
+                for k in range(j):
+                    s -= lo[j, k] * lo[j, k]
+                if not s > 0.0:
+                    return STEP_FAIL, kkt, ep, er, rs, fact if keep else fact_in, empty, empty, empty
+                dj = math.sqrt(s)
+                lo[j, j] = dj
+                for i in range(j + 1, nz):
+                    s = wq[m + i, m + j] + wq[m + j, m + i]
+                    for k in range(j):
+                        s -= lo[i, k] * lo[j, k]
+                    lo[i, j] = s / dj
+        ok, dx = _step_loops(wq, hh, rr, e, r, n, m)
+        if not ok:
+            return STEP_FAIL, kkt, ep, er, rs, fact if keep else fact_in, empty, empty, empty
+        smax = 0.0
+        for c in range(n):
+            v = abs(dx[c] / vscale[c])
+            if not v <= smax:  # NaN propagates
+                smax = v
+        if not smax <= max_step:
+            return STEP_FAIL, kkt, ep, er, rs, fact if keep else fact_in, empty, empty, empty
+        return CONTINUE, kkt, ep, er, rs, fact if keep else fact_in, dx if keep else empty, _moved_loops(x, free, dx, flush), empty
+    if polish_left:
+        ok, dx = _step_loops(wq, hh, rr, e, r, n, m)
+        if ok:
+            finite = True
+            smax = 0.0
+            for c in range(n):
+                if not math.isfinite(dx[c]):
+                    finite = False
+                smax = max(smax, abs(dx[c] / vscale[c]))
+            if finite and smax > polish_step:
+                return POLISH, kkt, ep, er, rs, fact if keep else fact_in, dx if keep else empty, _moved_loops(x, free, dx, flush), empty
+    ru = np.zeros((m, m))
+    for i in range(m):
+        for j in range(i, m):
+            if not math.isfinite(rr[i, j]):
+                return RANK_FAIL, kkt, ep, er, rs, fact if keep else fact_in, empty, empty, empty
+            ru[i, j] = rr[i, j]
+    sv = np.linalg.svd(ru)[1]
+    if not sv[m - 1] > rank_tol * sv[0]:
+        return RANK_FAIL, kkt, ep, er, rs, fact if keep else fact_in, empty, empty, empty
+    sym = np.empty((nz, nz))
+    for i in range(nz):
+        for j in range(nz):
+            v = 0.5 * (-wq[m + i, m + j] + -wq[m + j, m + i])
+            if not math.isfinite(v):
+                return RANK_FAIL, kkt, ep, er, rs, fact if keep else fact_in, empty, empty, empty
+            sym[i, j] = v
+    ev = np.linalg.eigvalsh(sym)
+    return CONVERGED, kkt, ep, er, rs, fact, empty, empty, ev
+
+
+def _reflect_rows(hh, a, m, n):
+    """``a ← Qᵀ a = H_{m−1} … H_0 a`` in place for an (n, n) array ``a`` (row operations)."""
+    s = np.empty(n)
+    for k in range(m):
+        t = hh[m, k]
+        if t == 0.0:
+            continue
+        for c in range(n):
+            s[c] = a[k, c]
+        for i in range(k + 1, n):
+            v = hh[k, i]
+            for c in range(n):
+                s[c] += v * a[i, c]
+        for c in range(n):
+            s[c] *= t
+            a[k, c] -= s[c]
+        for i in range(k + 1, n):
+            v = hh[k, i]
+            for c in range(n):
+                a[i, c] -= s[c] * v
+
+
+def _apply_qt(hh, v, m, n):
+    """``Qᵀ v = H_{m−1} … H_0 v`` from the reflectors ``hh`` (see :func:`_iterate_loops`)."""
+    out = v.copy()
+    for k in range(m):
+        t = hh[m, k]
+        if t == 0.0:
+            continue
+        s = out[k]
+        for i in range(k + 1, n):
+            s += hh[k, i] * out[i]
+        s *= t
+        out[k] -= s
+        for i in range(k + 1, n):
+            out[i] -= s * hh[k, i]
+    return out
+
+
+def _step_loops(wq, hh, rr, e, r, n, m):
+    """Compiled ``δx = Y p_Y − Z p_Z`` (see :func:`_null_space_step`) in the rotated basis:
+    ``Rᵀ p_Y = e``, ``(ZᵀWZ) p_Z = (Qᵀ r)[m:] + (ZᵀWY) p_Y``, ``δx = Q [p_Y; −p_Z]``: (ok, δx)."""
+    nz = n - m
+    py = np.zeros(m)
+    for i in range(m):  # Rᵀ p_Y = e
+        if rr[i, i] == 0.0:
+            return False, np.zeros(0)
+    for i in range(m):
+        s = e[i]
+        for j in range(i):
+            s -= rr[j, i] * py[j]
+        py[i] = s / rr[i, i]
+    qr_ = _apply_qt(hh, r, m, n)
+    rhs = np.zeros(nz)
+    for j in range(nz):
+        s = qr_[m + j]
+        for i in range(m):
+            s += wq[m + j, i] * py[i]
+        rhs[j] = s
+    # LU with partial pivoting of ZᵀWZ (dgesv; fails on an exactly zero pivot)
+    lu = np.empty((nz, nz))
+    for i in range(nz):
+        for j in range(nz):
+            lu[i, j] = wq[m + i, m + j]
+    for k in range(nz):
+        p = k
+        big = abs(lu[k, k])
+        for i in range(k + 1, nz):
+            if abs(lu[i, k]) > big:
+                big = abs(lu[i, k])
+                p = i
+        if lu[p, k] == 0.0:
+            return False, np.zeros(0)
+        if p != k:
+            for j in range(nz):
+                tmp = lu[k, j]
+                lu[k, j] = lu[p, j]
+                lu[p, j] = tmp
+            tmp2 = rhs[k]
+            rhs[k] = rhs[p]
+            rhs[p] = tmp2
+        inv = 1.0 / lu[k, k]
+        for i in range(k + 1, nz):
+            lik = lu[i, k] * inv
+            lu[i, k] = lik
+            if lik != 0.0:
+                for j in range(k + 1, nz):
+                    lu[i, j] -= lik * lu[k, j]
+                rhs[i] -= lik * rhs[k]
+    pz = np.zeros(nz)
+    for i in range(nz - 1, -1, -1):
+        s = rhs[i]
+        for j in range(i + 1, nz):
+            s -= lu[i, j] * pz[j]
+        pz[i] = s / lu[i, i]
+    # δx = Q [p_Y; −p_Z] = H_0 … H_{m−1} [p_Y; −p_Z]
+    dx = np.empty(n)
+    for i in range(m):
+        dx[i] = py[i]
+    for j in range(nz):
+        dx[m + j] = -pz[j]
+    for k in range(m - 1, -1, -1):
+        t = hh[m, k]
+        if t == 0.0:
+            continue
+        s = dx[k]
+        for i in range(k + 1, n):
+            s += hh[k, i] * dx[i]
+        s *= t
+        dx[k] -= s
+        for i in range(k + 1, n):
+            dx[i] -= s * hh[k, i]
+    return True, dx
+
+
+def _moved_loops(x, free, dx, flush):
+    xn = x.copy()
+    for c in range(free.shape[0]):
+        xn[free[c]] += dx[c]
+    if flush:
+        for i in range(xn.shape[0]):
+            if abs(xn[i]) < 1e-150:
+                xn[i] = 0.0
+    return xn
+
+
+def _load_compiled():
+    """The compiled iteration (numba, cached on disk), or False when numba cannot be imported."""
+    global _compiled, _built
+    if _compiled is None:
+        try:
+            import numba
+        except Exception:  # noqa: BLE001 - any import failure: numpy fallback
+            _compiled = False
+            return _compiled
+        if _built is not None:  # built before (and reset by a test): the same dispatchers
+            _compiled = _built
+            return _compiled
+        opts = {"cache": True, "nogil": True}
+        g = globals()
+        for name in ("_reflect_rows", "_apply_qt", "_step_loops", "_moved_loops"):
+            g[name] = numba.njit(**opts)(g[name])
+        fn = numba.njit(**opts)(_iterate_loops)
+
+        def iterate_compiled(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, consts):
+            return fn(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, *consts)
+
+        iterate_compiled.dispatcher = fn
+        _compiled = _built = iterate_compiled
+    return _compiled
+
+
+#: ``auto`` mode: the compiled kernel is loaded once this many fused iterations have run on the
+#: numpy twin in this process. Loading numba and the cached machine code costs ~1–2 s (more on a
+#: loaded machine); a compiled iteration saves ~0.1–0.5 ms at the orders of VJM chains, so the
+#: switch pays off only for long runs (maps, long or finely subdivided curves): a one-shot
+#: ``vjm-pin analyze`` or a short curve never imports numba.
+JIT_AFTER_ITERATIONS = 2000
+
+_numpy_iterations = 0
+
+
+def mode() -> str:
+    """``VJM_PIN_JIT`` read now: ``"0"`` (numpy), ``"1"`` (compiled) or ``"auto"``."""
+    v = os.environ.get("VJM_PIN_JIT", "auto").strip().lower()
+    if v in ("0", "false", "no", "off"):
+        return "0"
+    if v in ("1", "true", "yes", "on"):
+        return "1"
+    return "auto"
+
+
+def loaded() -> bool:
+    """True when the compiled kernel is loaded in this process."""
+    return bool(_compiled)
+
+
+def load() -> bool:
+    """Load the compiled kernel now (the caller expects a long run); in ``auto`` mode every solver
+    uses it from then on. False when numba is not importable (the numpy twin stays in use)."""
+    return bool(_load_compiled())
+
+
+def get():
+    """The iteration function to use now: :func:`iterate_numpy` when ``VJM_PIN_JIT=0`` or numba is
+    not importable; the compiled kernel when ``VJM_PIN_JIT=1``, or in ``auto`` mode when it is
+    already loaded (:func:`load`) or :data:`JIT_AFTER_ITERATIONS` numpy iterations have run."""
+    md = mode()
+    if md == "0":
+        return iterate_numpy
+    if md == "1" or _compiled or (_compiled is None and _numpy_iterations >= JIT_AFTER_ITERATIONS):
+        return _load_compiled() or iterate_numpy
+    return iterate_numpy
