@@ -246,7 +246,10 @@ def test_benchmark_issue14_section_runs_and_release_solver_agrees():
     assert n["force_agreement"] <= 1e-12 and n["iterations"]["release"] == n["iterations"]["now"]
     assert n["floor_s"] > 0 and n["per_iteration_s"]["now"] > 0
     c = bench.bench_curve_point_vs_release(1, 8, 1)
-    assert c["agreement"] <= 1e-12 and len(c["critical"]) == 1
+    # the release side also runs the generic per-point algebra (eq. 30 inverse, SVD null space),
+    # the current side analysis.point_kernel: μ differs by rounding, which moves the located
+    # critical force by ~1e-11 relative
+    assert c["agreement"] <= 1e-9 and len(c["critical"]) == 1
     q = {"newton_model_c": n, "newton_ur5": {"skipped": "not run here"}, "curve_k1": c, "curve_k8": c,
          "k8_over_k1": {"release": 1.0, "now": 1.0, "k": 1}, "import": {"skipped": "not run here"}, "map": {}}
     text = bench.format_issue14(q, bench.machine_info())

@@ -62,8 +62,9 @@ minimum by the same on ``dμ/ds``, both on the continued branch, every trial equ
 reached by continuation (with the continuity check) from the nearer end of the bracket;
 the force is located to ``1e-3·refine_tol`` relative. Two crossings within one step
 cannot hide: over every sub-step a cubic Hermite model of ``μ`` from its values and its
-derivatives along the branch (``dμ/ds`` by a finite difference along the tangent of
-eq. 29) is checked, and the sub-step is sampled at the model's extremum whenever the
+derivatives along the branch (``dμ/ds`` analytically by first-order perturbation of the
+eigenvalue, :mod:`vjm_pin.analysis.point_kernel`, or by a finite difference along the tangent of
+eq. 29 where the kernel declines) is checked, and the sub-step is sampled at the model's extremum whenever the
 model comes within its own curvature of zero. A start that is rigid along ``d`` (a
 straight chain of rigid links, Model A S: the force at ``s = 0`` is indeterminate) is
 searched along the force at the unloaded configuration: the critical point is then at
@@ -79,6 +80,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from vjm_pin.analysis.point_kernel import PointKernel, compiled, use_compiled
 from vjm_pin.exceptions import InputError, NoEquilibrium, SingularStiffness
 from vjm_pin.kinematics.chain import flush_tiny
 from vjm_pin.kinematics.dead_loads import Load
@@ -117,6 +119,12 @@ MAX_MOVE = 0.1
 MIN_STEP = 1e-10
 #: Largest recursion depth of the check for two crossings within one sub-step.
 DIP_DEPTH = 12
+
+#: Private switch (False: every point by the generic eq. 30 inverse and the SVD null space of
+#: check_stability_held, as released; for the side-by-side benchmark and the tests).
+_fast_points = True
+#: Private switch (False: dμ/ds by the forward difference of :meth:`_Tracer.dmu` everywhere).
+_analytic_rate = True
 
 
 @dataclass(frozen=True)
@@ -380,6 +388,7 @@ class _Tracer:
         self.range = float(max_deflection)
         self.P = _complement_rows(vm, d)
         self.free = solver.free
+        self.task = np.asarray(vm.task, dtype=int)
         self.var_scale = solver.var_scale
         self.hmin = MIN_STEP * self.range
         self.eps_abs = OFFSET_ABS * self.range
@@ -387,6 +396,12 @@ class _Tracer:
         self.thr = STABILITY_TOL * (spectral_norm(vm.K_theta) if vm.K_theta.size else 1.0)
         self.h = self.range
         self.seg_margin = 0.0  # largest −μ on the current stretch of the followed branch
+        # the per-point algebra in one pass where it is far from singular (point_kernel)
+        self.kernel = PointKernel(vm.K_theta, self.free, d[self.task], self.task) if _fast_points else None
+        # dμ/ds analytically where the Hessian of Ψ is in screw form (else by a difference)
+        self.mask = self.kin.support_mask(self.free) if _fast_points and getattr(self.kin, "uses_screw", False) else None
+        self._fn = None  # the compiled point kernel once wanted (point_kernel.use_compiled)
+        self._npts = 0
 
     # ------------------------------------------------------------------ evaluation
     def blocks(self, x, w):
@@ -396,12 +411,30 @@ class _Tracer:
 
     def point(self, eq: EquilibriumResult, s: float) -> _BP:
         b = self.blocks(eq.x, eq.wrench)
-        k, st = _stiffness_along(self.vm, b, self.d)
-        mu = _max_eig(check_stability_held(b, self.P))
+        fast = None
+        if self.kernel is not None:
+            if self._fn is None and use_compiled(self._npts):
+                self._fn = compiled()
+            self._npts += 1
+            fast = self.kernel.point(b, self.mask, eq.wrench, self._fn)
         held = getattr(eq, "stability_end_held", None)  # eq. (23) as the solver found it
         if held is None and getattr(eq, "held", None) is None:
             held = eq.stability  # every task component held: the verdict of eq. (23)
         lam = _max_eig(held if held is not None else check_stability_held(b, None))
+        if fast is not None:
+            # k, the tangent of eq. (29) along d and μ in one pass (point_kernel)
+            k, xd, fd, mu, rate = fast
+            p = _BP(s, eq, self.d @ eq.wrench, k, None, mu, lam)
+            if rate is not None and _analytic_rate:
+                p.dmu = rate
+            x_dot = np.zeros_like(eq.x)
+            x_dot[self.free] = xd
+            w_dot = np.zeros(6)
+            w_dot[self.task] = fd
+            p.tan = (x_dot, w_dot)
+            return p
+        k, st = _stiffness_along(self.vm, b, self.d)
+        mu = _max_eig(check_stability_held(b, self.P))
         return _BP(s, eq, self.d @ eq.wrench, k, st, mu, lam)
 
     def tangent(self, p: _BP):
@@ -422,8 +455,9 @@ class _Tracer:
         return xd, wd
 
     def dmu(self, p: _BP) -> float:
-        """``dμ/ds`` at ``p``: forward difference of ``μ`` along the tangent (eq. 29) over a
-        step that moves the configuration by 1e-6 (rad, scaled): error O(1e-6·μ'')."""
+        """``dμ/ds`` at ``p``: set by :meth:`point` from the point kernel (analytic) where it
+        applies; else the forward difference of ``μ`` along the tangent (eq. 29) over a step that
+        moves the configuration by 1e-6 (rad, scaled): error O(1e-6·μ'')."""
         if p.dmu is None:
             t = self.tangent(p)
             if t is None:
@@ -435,7 +469,10 @@ class _Tracer:
                 if sc * h > 1e-6:
                     h = 1e-6 / sc
                 b = self.blocks(p.eq.x + h * xd, p.eq.wrench + h * wd)
-                p.dmu = (_max_eig(check_stability_held(b, self.P)) - p.mu) / h
+                mu = self.kernel.margin(b) if self.kernel is not None else None
+                if mu is None:
+                    mu = _max_eig(check_stability_held(b, self.P))
+                p.dmu = (mu - p.mu) / h
         return p.dmu
 
     def scaled(self, dx) -> float:

@@ -1,0 +1,222 @@
+"""The per-point algebra of a serial curve (vjm_pin.analysis.point_kernel) against the generic path.
+
+- the tangent stiffness, the tangent of eq. (29) and the force-control margin μ of the kernel
+  (numpy and compiled) against stiffness_eq30 and check_stability_held on the same blocks;
+- the analytic dμ/ds (first-order perturbation of the constrained eigenvalue) against central
+  differences of the generic μ along the tangent, re-evaluated from the kinematics;
+- near-singular points are left to the generic path;
+- whole curves with the kernel against curves with every point by the generic path.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from vjm_pin.analysis import curve as curve_mod
+from vjm_pin.analysis import point_kernel as pk
+from vjm_pin.analysis.curve import _complement_rows, _direction, _stiffness_along, trace_curve
+from vjm_pin.model.registry import resolve_model
+from vjm_pin.solver import EquilibriumSolver, blocks_at
+from vjm_pin.solver.stability import check_stability_held
+
+
+def _generic_mu(vm, d, b) -> float:
+    return float(check_stability_held(b, _complement_rows(vm, d)).eigenvalues.max())
+
+
+def _scale(vm, d, b) -> float:
+    """Magnitude of the matrices μ is an eigenvalue of (for absolute tolerances on μ)."""
+    ev = check_stability_held(b, _complement_rows(vm, d)).eigenvalues
+    return max(float(np.abs(ev).max()), float(np.abs(vm.K_theta).max()))
+
+
+def _kernels():
+    out = [("numpy", None)]
+    fn = pk.compiled()
+    if fn:
+        out.append(("compiled", fn))
+    return out
+
+
+def _equilibria(name, direction, max_deflection, steps):
+    """The model, its unit direction, its solver and the equilibria of a short curve (s > 0)."""
+    vm = resolve_model(name)
+    solver = EquilibriumSolver(vm)
+    c = trace_curve(vm, direction, max_deflection, steps=steps, solver=solver)
+    return vm, _direction(vm, direction), solver, [p.equilibrium for p in c.points[1:]]
+
+
+CASES = [
+    # straight column before and after buckling (no moment in the wrench)
+    ("paper-c-s", [-1.0, 0.0, 0.0], 6e-4, 6),
+    # imperfect column (Z posture)
+    ("paper-b-z", [-1.0, 0.0, 0.0], 0.1, 4),
+    # a robot: 6-D task, moments in the end wrench (the ω×m terms of the screw Hessian)
+    ("ur5", [1.0, 0.0, 0.0], 5e-3, 3),
+]
+
+
+@pytest.fixture(scope="module", params=CASES, ids=[c[0] for c in CASES])
+def case(request):
+    return _equilibria(*request.param)
+
+
+def _kernel(vm, solver, d):
+    free = np.concatenate([vm.theta_idx, vm.q_idx]).astype(int)
+    task = np.asarray(vm.task, int)
+    mask = solver.kin.support_mask(free) if solver.kin.uses_screw else None
+    return pk.PointKernel(vm.K_theta, free, d[task], task), mask, free, task
+
+
+@pytest.mark.parametrize("kind,fn", _kernels())
+def test_kernel_matches_the_generic_stiffness_tangent_and_margin(case, kind, fn):
+    vm, d, solver, eqs = case
+    kern, mask, _, task = _kernel(vm, solver, d)
+    used = 0
+    for eq in eqs:
+        b = blocks_at(vm, eq.x, eq.wrench, solver.kin)
+        got = kern.point(b, mask, eq.wrench, fn)
+        k_ref, st = _stiffness_along(vm, b, d)
+        if got is None:  # left to the generic path: only where eq. (28) is not safely regular
+            continue
+        used += 1
+        k, xd, fd, mu, _ = got
+        assert st is not None
+        assert k == pytest.approx(k_ref, rel=1e-9)
+        xd_ref = np.concatenate([st.dtheta_dt @ d, st.dq_dt @ d])
+        assert np.allclose(xd, xd_ref, rtol=1e-8, atol=1e-10 * np.abs(xd_ref).max())
+        assert np.allclose(fd, (st.stiffness @ d)[task], rtol=1e-8, atol=1e-10 * abs(k_ref))
+        mu_ref = _generic_mu(vm, d, b)
+        assert abs(mu - mu_ref) <= 1e-10 * _scale(vm, d, b)
+    assert used >= len(eqs) - 1  # the shortcut is the rule, not the exception
+
+
+@pytest.mark.parametrize("kind,fn", _kernels())
+def test_analytic_margin_rate_matches_central_differences(case, kind, fn):
+    """dμ/ds = wᵀH'w − 2gᵀJ'w against (μ(x + hδx, F + hδF) − μ(x − hδx, F − hδF)) / 2h with the
+    generic μ, the kinematics re-evaluated at both configurations (two step sizes: the
+    difference converges to the analytic value)."""
+    vm, d, solver, eqs = case
+    kern, mask, free, task = _kernel(vm, solver, d)
+    assert mask is not None  # these models take the screw form
+    checked = 0
+    for eq in eqs:
+        b = blocks_at(vm, eq.x, eq.wrench, solver.kin)
+        got = kern.point(b, mask, eq.wrench, fn)
+        if got is None:
+            continue
+        _, xd, fd, _, rate = got
+        x_dot = np.zeros_like(eq.x)
+        x_dot[free] = xd
+        w_dot = np.zeros(6)
+        w_dot[task] = fd
+        sc = np.abs(xd / solver.var_scale).max()
+
+        def mu_at(h, eq=eq, x_dot=x_dot, w_dot=w_dot):
+            return _generic_mu(vm, d, blocks_at(vm, eq.x + h * x_dot, eq.wrench + h * w_dot, solver.kin))
+
+        # central differences and their Richardson extrapolation over a range of steps: μ is
+        # strongly curved on the straight column (small steps needed) and tiny past buckling
+        # (rounding dominates small steps); the differences converge to the analytic value
+        best = np.inf
+        for step in (1e-4, 1e-5, 1e-6, 1e-7, 1e-8):
+            h = step / sc
+            d1 = (mu_at(h) - mu_at(-h)) / (2 * h)
+            d2 = (mu_at(h / 2) - mu_at(-h / 2)) / h
+            best = min(best, abs(d1 - rate), abs((4 * d2 - d1) / 3 - rate))
+        assert best <= 2e-5 * abs(rate), (kind, rate, best)
+        checked += 1
+    assert checked >= 2
+
+
+def test_compiled_and_numpy_kernels_agree():
+    fn = pk.compiled()
+    if not fn:
+        pytest.skip("numba is not importable here: the numpy path is the only one")
+    vm, d, solver, eqs = _equilibria("paper-c-s", [-1.0, 0.0, 0.0], 6e-4, 4)
+    kern, mask, _, _ = _kernel(vm, solver, d)
+    for eq in eqs:
+        b = blocks_at(vm, eq.x, eq.wrench, solver.kin)
+        a, c = kern.point(b, mask, eq.wrench, None), kern.point(b, mask, eq.wrench, fn)
+        assert (a is None) == (c is None)
+        if a is None:
+            continue
+        assert c[0] == pytest.approx(a[0], rel=1e-10)
+        assert np.allclose(c[1], a[1], rtol=1e-10, atol=1e-12 * np.abs(a[1]).max())
+        assert np.allclose(c[2], a[2], rtol=1e-10, atol=1e-12 * np.abs(a[2]).max())
+        scale = _scale(vm, d, b)
+        assert abs(c[3] - a[3]) <= 1e-12 * scale
+        assert c[4] == pytest.approx(a[4], rel=1e-6, abs=1e-12 * scale)
+
+
+@pytest.mark.parametrize("kind,fn", _kernels())
+def test_rigid_start_is_left_to_the_generic_path(kind, fn):
+    """Model A S unloaded: the straight chain of rigid links cannot move along x to first order
+    (J rank deficient, eq. 28 singular): the kernel declines and the generic path says ``inf``."""
+    vm = resolve_model("paper-a-s")
+    solver = EquilibriumSolver(vm)
+    d = _direction(vm, [-1.0, 0.0, 0.0])
+    kern, mask, _, _ = _kernel(vm, solver, d)
+    b = blocks_at(vm, vm.reference, np.zeros(6), solver.kin)
+    assert kern.point(b, mask, np.zeros(6), fn) is None
+    assert np.isinf(_stiffness_along(vm, b, d)[0])
+
+
+def _trace_both(name, direction, max_deflection, steps):
+    vm = resolve_model(name)
+    old = curve_mod._fast_points
+    try:
+        curve_mod._fast_points = False
+        generic = trace_curve(vm, direction, max_deflection, steps=steps)
+    finally:
+        curve_mod._fast_points = old
+    return generic, trace_curve(vm, direction, max_deflection, steps=steps)
+
+
+@pytest.mark.parametrize(
+    "name,direction,max_deflection,steps,crit_rel",
+    [
+        ("paper-c-s", [-1.0, 0.0, 0.0], 0.5, 12, 1e-9),
+        ("paper-a-s", [-1.0, 0.0, 0.0], 1.0, 8, 1e-9),
+        # an imperfect point is the root of dμ/ds at a flat maximum of μ: it moves with the
+        # rounding of μ (by ~1e-7 already between two runs of the generic path whose μ differ
+        # by rounding only), and the forward difference it used had an O(h) bias
+        ("paper-b-z", [-1.0, 0.0, 0.0], 0.1, 6, 1e-6),
+        ("ur5", [0.0, 0.0, -1.0], 1e-3, 6, 1e-9),
+    ],
+)
+def test_curves_match_the_generic_per_point_path(name, direction, max_deflection, steps, crit_rel):
+    generic, fast = _trace_both(name, direction, max_deflection, steps)
+    assert len(fast.points) == len(generic.points)
+    scale = np.abs(generic.forces).max()
+    assert np.abs(fast.forces - generic.forces).max() <= 1e-9 * scale
+    for p, q in zip(generic.points, fast.points):
+        assert (p.stable, p.stable_end_held) == (q.stable, q.stable_end_held)
+        assert (p.force_control_margin > 0) == (q.force_control_margin > 0)
+        if np.isfinite(p.stiffness):
+            assert q.stiffness == pytest.approx(p.stiffness, rel=1e-8, abs=1e-12 * scale / max_deflection)
+        else:
+            assert np.isinf(p.stiffness) == np.isinf(q.stiffness)
+    assert [c.kind for c in fast.critical] == [c.kind for c in generic.critical]
+    for a, c in zip(generic.critical, fast.critical):
+        assert c.force == pytest.approx(a.force, rel=crit_rel)
+        assert c.index == a.index
+
+
+def test_curve_module_does_not_import_numba_and_jit_off_never_does():
+    code = (
+        "import sys\n"
+        "import vjm_pin.analysis.curve as c\n"
+        "assert 'numba' not in sys.modules, 'imported at module import'\n"
+        "from vjm_pin.model.registry import resolve_model\n"
+        "c.trace_curve(resolve_model('paper-c-s'), [-1, 0, 0], 0.5, steps=12)\n"
+        "assert 'numba' not in sys.modules, 'imported with VJM_PIN_JIT=0'\n"
+    )
+    env = dict(os.environ, VJM_PIN_JIT="0")
+    r = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300, check=False)
+    assert r.returncode == 0, r.stderr
