@@ -28,6 +28,10 @@ class Blocks:
         H_qq: (nq, nq) ``∂(J_qᵀF)/∂q``.
         K_theta: (nθ, nθ) spring stiffness.
         state: The full :class:`~vjm_pin.kinematics.chain.KinematicState`.
+        chain: For a long serial chain (:data:`CHAIN_MIN_N` free coordinates or more, screw-form
+            Hessian, the end wrench alone), what the O(n) algebra of
+            :mod:`vjm_pin.solver.chain_algebra` needs (:class:`ChainContext`): eq. (30) and the
+            stability verdict then use it; None otherwise (dense algebra).
     """
 
     J_theta: np.ndarray
@@ -38,6 +42,48 @@ class Blocks:
     H_qq: np.ndarray
     K_theta: np.ndarray
     state: KinematicState
+    chain: ChainContext | None = None
+
+
+#: Number of free coordinates (nθ + nq) from which :func:`evaluate_blocks` attaches a
+#: :class:`ChainContext` and eq. (30) runs in O(n) (measured crossover with the dense path:
+#: ~90 on the Model C column, ``scripts/benchmark.py`` ``bench_chain_algebra``).
+CHAIN_MIN_N = 96
+#: The same without numba (the numpy recursion: crossover between nθ = 144 and 1152).
+CHAIN_MIN_N_NUMPY = 480
+
+
+@dataclass(frozen=True)
+class ChainContext:
+    """The generators of a chain's matrices at one configuration (:mod:`vjm_pin.solver.chain_algebra`).
+
+    Attributes:
+        layout: :class:`~vjm_pin.solver.chain_algebra.ChainLayout` of the model.
+        jacobian: (6, nv) ``LOCAL_WORLD_ALIGNED`` end-frame Jacobian, all joints.
+        wrench: (6,) the end wrench whose eq. (16) contraction is ``H`` (N, N·m).
+        task: constrained task components (the rows of ``J_θ``, ``J_q``).
+    """
+
+    layout: object
+    jacobian: np.ndarray
+    wrench: np.ndarray
+    task: tuple[int, ...]
+
+
+def chain_context(vm: VjmModel, state: KinematicState, wrench: np.ndarray) -> ChainContext | None:
+    """:class:`ChainContext` of ``vm`` at ``state`` under the 6-D end ``wrench``, or None when the
+    model is short (fewer than :data:`CHAIN_MIN_N` free coordinates, :data:`CHAIN_MIN_N_NUMPY`
+    without numba: dense algebra is faster)."""
+    n = len(vm.theta_idx) + len(vm.q_idx)
+    if n < CHAIN_MIN_N:
+        return None
+    from vjm_pin.solver.chain_algebra import chain_layout, compiled_available  # lazy: long chains only
+
+    if n < CHAIN_MIN_N_NUMPY and not compiled_available():
+        return None
+
+    layout = chain_layout(vm.K_theta, vm.theta_idx, vm.q_idx)
+    return ChainContext(layout, state.jacobian, np.array(wrench, dtype=float), tuple(vm.task))
 
 
 def full_wrench(vm: VjmModel, f_task: np.ndarray) -> np.ndarray:
@@ -73,6 +119,9 @@ def evaluate_blocks(
             state = kin.evaluate(x, hessian=True)
         hz = state.psi_hessian(wrench)[np.ix_(free, free)]  # (θ, q) order; the blocks are views
     jz = state.jacobian[task][:, free]
+    # the chain generators equal this H only for the plain screw form (no other Hessian terms)
+    plain = getattr(kin, "uses_screw", False) and type(kin).psi_hessian is Kinematics.psi_hessian
+    chain = chain_context(vm, state, wrench) if plain else None
     b = Blocks(
         J_theta=jz[:, :nt],
         J_q=jz[:, nt:],
@@ -82,6 +131,7 @@ def evaluate_blocks(
         H_qq=hz[nt:, nt:],
         K_theta=vm.K_theta,
         state=state,
+        chain=chain,
     )
     remember_blocks(vm, kin, x, wrench, b)
     return b

@@ -138,6 +138,24 @@ def check_stability(b: Blocks, tol: float = STABILITY_TOL) -> StabilityResult:
     return StabilityResult(stable, ev, basis.shape[1], float(thr))
 
 
+def stability_verdict(b: Blocks, tol: float = STABILITY_TOL) -> bool:
+    """``check_stability(b, tol).stable`` (eq. 23, end held in every task row), in O(n) for a
+    long serial chain (``b.chain``, :func:`~vjm_pin.solver.chain_algebra.chain_stability`: one
+    factorisation of the bordered symmetric part shifted by the threshold, Sylvester's count of
+    its negative pivots; the same relative threshold ``tol · ‖K_θ‖₂``). Falls back to
+    :func:`check_stability` for short chains and when the count is not reliable (an eigenvalue
+    at the threshold, a rank-deficient task Jacobian). Use it where only the verdict is needed
+    (a curve point, a Newton acceptance test); :func:`check_stability` also gives the eigenvalues."""
+    c = getattr(b, "chain", None)
+    if c is not None and len(c.task) == b.J_theta.shape[0]:
+        from vjm_pin.solver.chain_algebra import chain_stability
+
+        verdict = chain_stability(c.layout, c.jacobian, c.wrench, c.task, tol)
+        if verdict is not None:
+            return verdict.stable
+    return check_stability(b, tol).stable
+
+
 def check_stability_held(b: Blocks, held: np.ndarray | None = None, tol: float = STABILITY_TOL) -> StabilityResult:
     """Stability under mixed control: the end held only in the rows ``held`` (paper §4.2).
 

@@ -178,6 +178,10 @@ def stiffness_eq30(b: Blocks, task=(0, 1, 2, 3, 4, 5)) -> StiffnessResult:
     direction and the passive joints are independent; otherwise
     :class:`SingularStiffness` says which.
     """
+    if getattr(b, "chain", None) is not None:  # a long serial chain: O(n) recursion (chain_algebra)
+        fast = _eq30_chain(b)
+        if fast is not None:
+            return _embed(task, *fast, "eq30")
     a = eq28_matrix(b)
     m, nq = b.J_theta.shape[0], b.J_q.shape[1]
     inv, regular = _inverse_if_regular(a)
@@ -190,6 +194,31 @@ def stiffness_eq30(b: Blocks, task=(0, 1, 2, 3, 4, 5)) -> StiffnessResult:
         rhs[:m] = np.eye(m)
         x = np.linalg.solve(a, rhs)
     return _embed(task, x[:m], x[m : m + nq], x[m + nq :], "eq30")
+
+
+#: Smallest pivot reciprocal condition (:class:`~vjm_pin.solver.chain_algebra.Factor`) for which
+#: eq. (30) keeps the O(n) chain result; below it (near a critical point, where the dense path
+#: decides whether the matrix is singular) the dense path runs.
+CHAIN_TRUST_RCOND = 1e-8
+
+
+def _eq30_chain(b: Blocks):
+    """``(K_C, K_q, K_θ)`` of eq. (30) by the O(n) chain recursion on ``b.chain``
+    (:class:`~vjm_pin.solver.chain_algebra.ChainKKT`: the same bordered matrix, refined solves),
+    or None when its pivots or residual are not trustworthy (then the dense path decides)."""
+    from vjm_pin.solver.chain_algebra import SOLVE_RTOL, ChainKKT
+
+    c = b.chain
+    nt = b.J_theta.shape[1]
+    if len(c.task) != b.J_theta.shape[0] or c.layout.n != nt + b.J_q.shape[1]:
+        return None
+    kkt = ChainKKT(c.layout, c.jacobian, c.wrench, c.task)
+    if not kkt.reliable or kkt.factor.rcond < CHAIN_TRUST_RCOND:
+        return None
+    kc, dxdt, res = kkt.stiffness()
+    if not res <= SOLVE_RTOL or not np.isfinite(kc).all() or not np.isfinite(dxdt).all():
+        return None
+    return kc, dxdt[nt:], dxdt[:nt]
 
 
 def _reduced(b: Blocks):
