@@ -21,6 +21,13 @@ from .chains import random_vjm
 BACKENDS = ("numpy", "numba")
 
 
+@pytest.fixture(autouse=True)
+def _numba_allowed(monkeypatch):
+    """The suite runs with ``VJM_PIN_JIT=0`` (tests/conftest.py), which switches the compiled
+    recursion off at import; these tests choose the backend themselves."""
+    monkeypatch.setattr(ca, "_NO_NUMBA", False)
+
+
 @pytest.fixture(params=BACKENDS)
 def backend(request, monkeypatch):
     if request.param == "numba":

@@ -34,7 +34,8 @@ LAPACK directly for small orders) and the compiled :func:`_point_loops` (numba
 ``njit(cache=True)``, explicit loops and numba's ``np.linalg``: one call instead of ~60 small
 numpy calls per point). numba is imported lazily (:func:`use_compiled`, the solver's
 ``VJM_PIN_JIT`` switch): never at import, never with ``VJM_PIN_JIT=0``, and in ``auto`` mode
-only once numba is loaded anyway or a curve has evaluated :data:`AUTO_AFTER` points.
+only once numba is loaded anyway (the solver's kernel switches after
+:data:`vjm_pin.solver.kernel.JIT_AFTER_ITERATIONS` iterations: one rule for the whole package).
 ``tests/test_point_kernel.py`` compares both implementations with each other and with the
 generic path, and the analytic ``dμ/ds`` with finite differences.
 """
@@ -551,17 +552,14 @@ def compiled():
     return _compiled
 
 
-#: Points a tracer evaluates with numpy before it loads the compiled kernel in ``auto`` mode
-#: (a short curve does not pay numba's import); at once when numba is already imported.
-AUTO_AFTER = 8
-
-
 def use_compiled(points_so_far: int) -> bool:
     """Whether the compiled kernel is wanted now (``VJM_PIN_JIT``; ``auto``: numba already
-    imported in this process, or more than :data:`AUTO_AFTER` points evaluated)."""
+    imported in this process, e.g. by the solver's kernel after its iteration threshold).
+    ``points_so_far`` is kept for the caller's bookkeeping; the rule does not count points, so a
+    short curve never pays numba's import (~1-2 s)."""
     md = _jit_mode()
     if md == "0":
         return False
-    if md == "1" or _compiled or "numba" in sys.modules or points_so_far >= AUTO_AFTER:
+    if md == "1" or _compiled or "numba" in sys.modules:
         return bool(compiled())
     return False

@@ -42,7 +42,7 @@ the terms it was computed from) and a factorisation with a near-singular pivot s
 
 The loops run compiled by numba (``@njit(cache=True)``, imported on first use only: a one-shot
 ``vjm-pin analyze`` of a short chain never imports it); :data:`BACKEND` ``"numpy"`` or the
-environment variable ``VJM_PIN_NO_NUMBA=1`` (read at import) select the pure-numpy version of
+solver's switch ``VJM_PIN_JIT=0`` (read at import, :mod:`vjm_pin.solver.kernel`) select the pure-numpy version of
 the same recursion, which the tests compare with the compiled one and with dense numpy.
 
 Use: :func:`chain_layout` once per model; per configuration (Jacobian ``J6`` of all joints, end
@@ -58,6 +58,7 @@ and mode). :func:`vjm_pin.solver.blocks.evaluate_blocks` attaches what these nee
 from __future__ import annotations
 
 import os
+import sys
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -186,8 +187,8 @@ class Factor:
         return out[:, 0] if one else out
 
 
-#: ``VJM_PIN_NO_NUMBA=1`` in the environment at import: the numpy recursion.
-_NO_NUMBA = os.environ.get("VJM_PIN_NO_NUMBA") == "1"
+#: ``VJM_PIN_JIT=0`` (the solver's switch) in the environment at import: the numpy recursion.
+_NO_NUMBA = os.environ.get("VJM_PIN_JIT", "auto").strip().lower() in ("0", "false", "no", "off")
 
 
 def _use_numba() -> bool:
@@ -195,19 +196,24 @@ def _use_numba() -> bool:
         return False
     if BACKEND == "numba":
         return True
-    return _kernels() is not None
+    return compiled_available() and _kernels() is not None
 
 
 def compiled_available() -> bool:
-    """Whether the compiled recursion would run (numba installed and not switched off), without
-    importing numba."""
+    """Whether the compiled recursion runs now, without importing numba: not switched off
+    (:data:`BACKEND`, ``VJM_PIN_JIT=0``) and, in ``auto`` mode, numba already imported in this
+    process (e.g. by the solver's kernel after its iteration threshold) or ``VJM_PIN_JIT=1``: the
+    package's one rule, so a one-shot run never pays numba's import (~1-2 s)."""
     if BACKEND == "numpy" or _NO_NUMBA:
         return False
     if _KERNELS:
         return _KERNELS[0] is not None
-    import importlib.util
+    wanted = os.environ.get("VJM_PIN_JIT", "auto").strip().lower() in ("1", "true", "yes", "on")
+    if BACKEND == "numba" or wanted or "numba" in sys.modules:
+        import importlib.util
 
-    return importlib.util.find_spec("numba") is not None
+        return importlib.util.find_spec("numba") is not None
+    return False
 
 
 def factor(m: QuasiMatrix, symmetric: bool = False) -> Factor:
