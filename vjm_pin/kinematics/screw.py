@@ -24,9 +24,11 @@ columns; among the joints that do, Pinocchio numbers a parent before its childre
 supports ``i``" is ``j ≤ i``. Valid when every joint is a 1-DoF revolute or prismatic joint
 (:func:`screw_applicable`); other joint types (spherical, free-flyer, …) keep Pinocchio's tensor.
 
-The kernel is vectorised numpy (no compiled code: at the sizes of VJM chains, nv ≤ a few
-hundred, its cost is two small matrix products and is dominated by the interpreter, which a
-compiled kernel would not remove from the surrounding solver).
+This function is the vectorised numpy form (two small matrix products), used wherever a
+Hessian is formed on its own; the serial solver's Newton loop evaluates the same formula inside
+its fused compiled iteration (:mod:`vjm_pin.solver.kernel`, numba, with a numpy twin), and
+:mod:`vjm_pin.solver.chain_algebra` uses its rank-3 generators (``ω``, ``v × f + ω × m``,
+``v × f``) to factor ``K − H`` in O(n) along the chain.
 """
 
 from __future__ import annotations
