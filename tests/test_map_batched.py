@@ -102,3 +102,85 @@ def test_local_and_dask_agree_bit_for_bit_on_batched_maps():
     for f in FIELDS:
         assert np.array_equal(getattr(local, f), getattr(dask, f)), f
     assert np.all(local.status == "ok")
+
+
+# ----------------------------------------------------------------------------- issue 14: speed
+@pytest.mark.parametrize("wrench", [[0, 0, -100, 0, 0, 0], [30, -20, -150, 4, -3, 2]])
+def test_compiled_kernel_equals_numpy_twin(ur5, wrench):
+    """The numba kernel (K − H by loops, Cholesky steps and C = YᵀY under a force alone) and its
+    numpy twin (stacked products, LU solves) give the same map to rounding."""
+    pytest.importorskip("numba")
+    from vjm_pin.analysis.batched import BatchedChain
+
+    names, poses = sample_poses(ur5, 30, seed=12)
+    w = np.array(wrench, float)
+    chain = BatchedChain(ur5)
+    twin = chain.solve_arrays(names, poses, w)
+    chain.jit = True
+    fast = chain.solve_arrays(names, poses, w)
+    assert np.array_equal(twin[0], fast[0]) and twin[0].sum() >= 25
+    keep = twin[0]
+    np.testing.assert_array_equal(twin[1], fast[1])  # p0: the same Pinocchio calls
+    scale = np.abs(twin[2][keep]).max()
+    np.testing.assert_allclose(fast[2][keep], twin[2][keep], rtol=0, atol=1e-12 * scale)
+    for a, b in zip(fast[3:], twin[3:]):
+        np.testing.assert_allclose(a[keep], b[keep], rtol=1e-10)
+
+
+def test_stacked_joint_origins_are_pinocchios(ur5):
+    import pinocchio as pin
+
+    from vjm_pin.analysis.batched import BatchedChain
+
+    chain = BatchedChain(ur5)
+    names, poses = sample_poses(ur5, 5, seed=4)
+    data = ur5.model.createData()
+    for sub in (slice(None), slice(1, 3)):  # all motors, or two of them (the rest at the reference)
+        nm, ps = names[sub], poses[:, sub]
+        got = chain.joint_origins(nm, ps)
+        x, _ = chain._start(nm, ps)
+        for i in range(len(ps)):
+            pin.forwardKinematics(ur5.model, data, x[i])
+            ref = np.array([m.translation for m in data.oMi[1:]])
+            np.testing.assert_allclose(got[i], ref, rtol=0, atol=1e-14)
+
+
+def test_stacked_log3_is_pinocchios():
+    import pinocchio as pin
+
+    from vjm_pin.analysis.batched import log3_stacked
+
+    rng = np.random.default_rng(5)
+    axes = rng.normal(size=(40, 3))
+    axes /= np.linalg.norm(axes, axis=1)[:, None]
+    angles = np.concatenate([[0.0, 1e-12, 1e-8, 5e-5, 2e-4], rng.uniform(0, np.pi, 30), [3.05, 3.1, 3.14, 3.1415926, np.pi]])
+    rots = np.array([pin.exp3(a * t) for a, t in zip(axes, angles)])
+    got = log3_stacked(rots)
+    ref = np.array([pin.log3(r) for r in rots])
+    # the rounding of vee(R − Rᵀ) grows as 1/sin θ towards π (beyond LOG3_STACKED_MAX pin.log3 itself)
+    err = np.abs(got - ref).max(axis=1)
+    assert np.all(err <= 2e-15 / np.maximum(np.sin(angles), 0.1))
+
+
+def test_compiled_maps_agree_bit_for_bit_on_every_backend(monkeypatch):
+    """A map large enough for the compiled kernels (JIT_MIN_POSES lowered here): serial, local
+    processes and Dask workers take the map's one choice and give the same bits."""
+    pytest.importorskip("numba")
+    vm = build_robot("ur5").vm
+    names, poses = sample_poses(vm, 32, seed=21)
+    w = np.array([0.0, 10.0, -100.0, 0.0, 0.0, 0.0])
+    monkeypatch.setenv("VJM_PIN_JIT", "1")  # the test suite runs with 0 (tests/conftest.py)
+    monkeypatch.setattr(maps, "JIT_MIN_POSES", 1)
+    choice = []
+    use = maps._use_jit
+    monkeypatch.setattr(maps, "_use_jit", lambda *a: choice.append(use(*a)) or choice[-1])
+    serial = run_map(vm, names, poses, w, backend="serial", chunk=8)
+    local = run_map(vm, names, poses, w, backend="local", workers=2, chunk=8)
+    dask = run_map(vm, names, poses, w, backend="dask", workers=2, chunk=8)
+    assert choice == [True, True, True]
+    for r in (local, dask):
+        for f in FIELDS:
+            assert np.array_equal(getattr(r, f), getattr(serial, f)), f
+    monkeypatch.setattr(maps, "JIT_MIN_POSES", 10**9)
+    twin = run_map(vm, names, poses, w, backend="serial", chunk=8)  # numpy twin: the same to rounding
+    np.testing.assert_allclose(twin.k_min, serial.k_min, rtol=1e-10)

@@ -46,7 +46,7 @@ def test_memory_does_not_grow_with_the_number_of_poses(ur5, tmp_path, monkeypatc
     most the chunks in flight, whatever N, and no per-pose rows are kept after writing."""
     import vjm_pin.analysis.map_backends as mb
 
-    def fake_worker(text, names, wrench, gravity, method, loads, chunk):
+    def fake_worker(text, names, wrench, gravity, method, loads, jit, csv_text, chunk):
         return [
             {"p0": np.zeros(3), "deflection": np.full(6, 1e-3), "k_along": 1.0, "k_min": 0.5, "stable": True, "status": "ok"}
             for _ in chunk
@@ -135,3 +135,20 @@ def test_cli_streams_csv_and_plots_with_a_floor(tmp_path, capsys):
     assert capsys.readouterr().err == ""
     assert main(["map", "ur5", "--samples", "3", "--plot", str(png), "--floor", "high"]) == 2
     assert "--floor" in capsys.readouterr().err
+
+
+def test_csv_text_is_the_csv_modules(ur5, tmp_path):
+    """The rows are formatted in bulk (maps._csv_lines): the same text as csv.writer on the
+    per-field values (repr of the floats, 0/1, the status)."""
+    import io
+
+    names, poses = sample_poses(ur5, 7, seed=8)
+    res = run_map(ur5, names, poses, W, backend="serial")
+    res.to_csv(tmp_path / "m.csv")
+    buf = io.StringIO(newline="")
+    wr = csv.writer(buf)
+    cols = res.columns()
+    wr.writerow(list(cols))
+    for i in range(len(poses)):
+        wr.writerow([maps._csv_value(c[i]) for c in cols.values()])
+    assert (tmp_path / "m.csv").read_bytes() == buf.getvalue().encode()

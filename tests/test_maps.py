@@ -165,3 +165,25 @@ def test_map_of_a_model_without_motors_says_what_to_do(capsys):
     assert main(["map", "paper-c-s", "--samples", "3"]) == 2
     err = capsys.readouterr().err
     assert "no actuated joint" in err and "--grid" in err and len(err.strip().splitlines()) == 1
+
+
+def test_library_messages_name_parameters_and_the_cli_names_options(ur5, capsys):
+    """sample_poses / parse_grid / grid_poses speak of their parameters (n, seed, grid); the
+    CLI says --samples, --seed, --grid."""
+    for call, word in (
+        (lambda: sample_poses(ur5, 0), "n must be a positive integer"),
+        (lambda: sample_poses(ur5, 3, seed=-1), "seed must"),
+        (lambda: parse_grid(["elbow_joint=0:1"]), "grid item"),
+        (lambda: parse_grid(["elbow_joint=1:0:3"]), "grid elbow_joint"),
+    ):
+        with pytest.raises(InputError) as e:
+            call()
+        assert word in str(e.value) and "--" not in str(e.value)
+    for argv, option in (
+        (["--samples", "0"], "--samples"),
+        (["--samples", "3", "--seed", "-1"], "--seed"),
+        (["--grid", "elbow_joint=1:0:3"], "--grid elbow_joint"),
+    ):
+        assert main(["map", "ur5", *argv, "--backend", "serial"]) == 2
+        err = capsys.readouterr().err
+        assert option in err and len(err.strip().splitlines()) == 1

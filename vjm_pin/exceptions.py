@@ -149,8 +149,10 @@ class MapInterrupted(KeyboardInterrupt):
     general still sees it. It carries what was finished.
 
     Attributes:
-        result: A :class:`~vjm_pin.analysis.maps.MapResult` of the poses finished before the
-            interrupt (possibly none), in the order they were requested.
+        result: The poses finished before the interrupt (possibly none), in the order they were
+            requested: a :class:`~vjm_pin.analysis.maps.MapResult` from ``run_map``, a
+            :class:`~vjm_pin.analysis.maps.MapSummary` (rows already in the CSV file) from
+            ``stream_map``.
         requested: The number of poses the map was asked for.
     """
 

@@ -7,38 +7,48 @@ iteration** (the first attempt of ``solve_wrench``: plain Newton steps from the 
 each kept only if it halves the residual and stays within the step limit, then up to
 ``POLISH_ITERATIONS`` polishing steps) runs on a whole chunk at once:
 
-- one Pinocchio frame-Jacobian evaluation per pose per iteration (``computeJointJacobians``,
-  ``updateFramePlacement``, ``getFrameJacobian`` on one shared ``pin.Data``);
+- one Pinocchio call per pose per iteration (``computeFrameJacobian`` on one shared ``pin.Data``,
+  which also leaves the end placement in ``data.oMf``); nothing else per pose in Python;
 - the Hessian of ``Ψ = g(θ)ᵀF`` (eq. 16) in screw form from J
   (:func:`vjm_pin.kinematics.screw.psi_hessian_screw`) for all poses as stacked matrix products;
-- the Newton steps ``(K_θ − H) Δθ = −r`` of eq. (5) with one stacked ``np.linalg.solve``.
+- the Newton steps ``(K_θ − H) Δθ = −r`` of eq. (5) with one stacked ``np.linalg.solve``;
+- or, for maps of many poses, all of one iteration's algebra after the Pinocchio call (residual,
+  convergence test, ``K − H``, Cholesky step, and at convergence ``C`` from the same factor) in one
+  compiled kernel (:func:`kernel`, numba; the numpy twin above is its reference, equal to
+  rounding, ``tests/test_map_batched.py``). Why numba: as :mod:`vjm_pin.solver.kernel` (no
+  compiler at install time, a pure-numpy fallback, machine code cached on disk);
+- the start of each pose (joint values, θ₀), the scale ``L_c`` of prismatic coordinates (the joint
+  origins by stacked forward kinematics, :meth:`BatchedChain.joint_origins`) and the deflection
+  ``(p − p₀, log3(R R₀ᵀ))`` (:func:`log3_stacked`) on stacked arrays.
 
 At the equilibrium the indices of :mod:`vjm_pin.analysis.maps` follow from the loaded compliance
 without passive joints, the Schur complement of the matrix of eq. (28):
 ``C = K_C⁻¹ = J (K_θ − H)⁻¹ Jᵀ`` (task rows), ``k_along = 1/(f̂ᵀ C_tt f̂)``,
 ``k_min = 1/λ_max(sym C_tt)``; stability under the dead load (the verdict ``solve_wrench``
-reports) is ``K_θ − H`` positive definite (eq. 23 with nothing held).
+reports) is ``K_θ − H`` positive definite (eq. 23 with nothing held), certified by a Cholesky
+factorisation of ``sym(K_θ − H) − τ I`` (:data:`STABLE_MARGIN`).
 
 Scope and hand-back. Chains with spring and actuated (or locked) joints only: no passive joints,
 no loop closures, no dead loads at frames or link weights, every joint revolute or prismatic
-(screw form). A pose is handed back to the per-pose path (``None`` in the result) whenever the
+(screw form). A pose is handed back to the per-pose path (``keep`` False) whenever the
 batch cannot vouch for the same answer: the local iteration fails (``solve_wrench`` would go on
 with descent and continuation), ``K_θ − H`` is not clearly positive definite (unstable or near a
-critical load: the per-pose path decides), or ``C`` is ill-conditioned (near a singular pose,
-where eq. (28) may be singular). The poses that stay agree with the per-pose path to rounding
-(``tests/test_map_batched.py``). Results depend only on the pose and the chunk's other poses
-do not enter a pose's arithmetic, so local and Dask maps agree bit for bit.
+critical load: the per-pose path decides), or ``K_C`` is near singular (:data:`MAX_COND`, on the
+equilibrated matrix as the per-pose tests of eq. 28 and of
+:func:`~vjm_pin.analysis.indices.weakest_translation`). The poses that stay agree with the per-pose
+path to rounding (``tests/test_map_batched.py``). Results depend only on the pose — the chunk's
+other poses do not enter a pose's arithmetic (stacked products by :func:`_mm`, LAPACK one matrix
+at a time) — so local and Dask maps agree bit for bit.
 """
 
 from __future__ import annotations
 
-import math
 import threading
 
 import numpy as np
 import pinocchio as pin
 
-from vjm_pin.kinematics.chain import deflection, flush_tiny
+from vjm_pin.kinematics.chain import flush_tiny
 from vjm_pin.kinematics.screw import screw_applicable, support_mask
 from vjm_pin.model.format import VjmModel
 from vjm_pin.solver.equilibrium import LOCAL_MAX_ITER, POLISH_ITERATIONS, POLISH_STEP
@@ -50,9 +60,22 @@ MAX_STEP = 0.3
 #: A pose stays in the batch only when ``λ_min(sym(K_θ − H)) > STABLE_MARGIN · ‖K_θ‖₂`` (far
 #: above the stability threshold ``STABILITY_TOL · ‖K_θ‖₂``: the verdict cannot flip by rounding).
 STABLE_MARGIN = 1e-6
-#: ... and the 2-norm condition number of the task compliance ``C`` is below this (far from the
-#: ``SINGULAR_RCOND`` test of eq. 28, and from the singular directions of ``weakest_translation``).
+#: ... and (a bound of) the 2-norm condition number of the equilibrated task compliance ``D⁻¹ C D⁻¹`` (``D``
+#: the scaling of ``K_C`` in :func:`~vjm_pin.analysis.indices.weakest_translation`) is below this:
+#: 100× from its singular-direction test ``SINGULAR_TOL = 1e-10`` (the estimate's relative error is
+#: about cond·ε ≤ 1e-8, so the verdict cannot flip), further from the ``1e-13`` reciprocal
+#: condition of eq. (28), and the indices of a kept pose agree with the per-pose path's to about
+#: cond·ε. About 1 random ur5 pose in 400 is beyond it (a wrist or elbow near a singular pose).
 MAX_COND = 1e8
+#: Poses solved together: ``BLOCK_ENTRIES / n²`` (the (P, n, n) temporaries of a block stay in the
+#: processor's cache), between ``BLOCK_MIN`` and ``BLOCK_MAX`` (the interpreter's cost per
+#: block is shared by enough poses). Numbers do not depend on it.
+BLOCK_ENTRIES = 200_000
+BLOCK_MIN = 64
+BLOCK_MAX = 512
+#: Rotations of the deflection above this angle (rad) go through ``pin.log3`` one by one (near π
+#: the stacked formula loses digits).
+LOG3_STACKED_MAX = 3.0
 
 
 def batch_applicable(vm: VjmModel, gravity=None, loads=()) -> bool:
@@ -72,53 +95,104 @@ class BatchedChain:
     """The constant data of one model for batched solves (one per model and thread; it holds the
     thread's ``pin.Data``)."""
 
-    def __init__(self, vm: VjmModel):
+    def __init__(self, vm: VjmModel, jit: bool = False):
         self.vm = vm
-        self.model = vm.model
-        self.data = vm.model.createData()
+        self.jit = bool(jit)  # the compiled kernel (:func:`kernel`) for the Newton systems
+        model = self.model = vm.model
+        self.data = model.createData()
         self.fid = vm.frame_id
+        nv = model.nv
         self.free = np.asarray(vm.theta_idx, int)
+        self.all_free = bool(np.array_equal(self.free, np.arange(nv)))
         self.task = np.asarray(vm.task, int)
-        self.K = np.asarray(vm.K_theta, float)
+        self.K = np.ascontiguousarray(vm.K_theta, float)
         self.kscale = max(float(np.abs(self.K).max()), 1e-300)
         self.knorm = float(np.linalg.norm(self.K, 2)) if self.K.size else 1.0
-        self.mask = support_mask(vm.model.nv, self.free)
-        nv = vm.model.nv
-        prism = np.array([vm.model.joints[i + 1].shortname().startswith("JointModelP") for i in range(nv)])
+        self.k_symmetric = bool(np.array_equal(self.K, self.K.T))
+        self.mask = np.ascontiguousarray(support_mask(nv, self.free))
+        prism = np.array([model.joints[i + 1].shortname().startswith("JointModelP") for i in range(nv)])
         self.prism = prism[self.free]
         self.index = {n: i for i, n in enumerate(vm.joint_names)}
         theta = {int(i): k for k, i in enumerate(vm.theta_idx)}
         self.theta_pos = {n: theta.get(i) for n, i in self.index.items() if vm.roles[n] == "actuated"}
+        self._plans: dict = {}
 
-    # ------------------------------------------------------------------ per pose
-    def _start(self, names, values):
-        vm = self.vm
-        ref = vm.reference.copy()
-        theta0 = vm.theta0.copy()
-        for n, x in zip(names, values):
-            x = float(x)
-            ref[self.index[n]] = x
-            k = self.theta_pos.get(n)
-            if k is not None:
-                theta0[k] = x
-        return ref, theta0
+    # ------------------------------------------------------------------ stacked kinematics
+    def _origin_plan(self, names):
+        """Forward kinematics of the joint origins for poses that set only the joints ``names``
+        (the others stay at the reference): every transform between two set joints is constant
+        (``jointPlacement · exp(S q_ref)`` multiplied out once), so a pose costs a few stacked
+        products per set joint, not per joint. Returns (steps, groups): the set joints in tree
+        order ``(joint, anchor, R, t, axis, prismatic, column)`` with ``oMi[joint] = oMi[anchor] ·
+        (R, t) · exp(axis · pose[column])``; and per anchor the (joint indices, (3, m) origins in
+        the anchor's frame) of the joints it carries."""
+        key = tuple(names)
+        plan = self._plans.get(key)
+        if plan is not None:
+            return plan
+        model = self.model
+        data = model.createData()
+        pin.computeJointJacobians(model, data, pin.neutral(model))
+        col = {model.getJointId(n): c for c, n in enumerate(names)}
+        ref = self.vm.reference
+        anchor = {0: (0, pin.SE3.Identity())}
+        steps, groups = [], {}
+        for j in range(1, model.njoints):
+            jm = model.joints[j]
+            sub = pin.getJointJacobian(model, data, j, pin.LOCAL)[:, jm.idx_v].copy()  # (v, ω)
+            a, m = anchor[model.parents[j]]
+            pre = m * model.jointPlacements[j]
+            if j in col:
+                pr = not np.any(sub[3:])
+                steps.append((j, a, pre.rotation.copy(), pre.translation.copy(), (sub[:3] if pr else sub[3:]).copy(), pr, col[j]))
+                anchor[j] = (j, pin.SE3.Identity())
+                continue
+            mj = pre * pin.exp6(pin.Motion(sub * float(ref[jm.idx_q])))
+            anchor[j] = (a, mj)
+            groups.setdefault(a, []).append((j - 1, mj.translation.copy()))
+        plan = (
+            steps,
+            [(a, np.array([i for i, _ in g]), np.array([t for _, t in g]).T) for a, g in groups.items()],
+        )
+        self._plans[key] = plan
+        return plan
 
-    def _var_scale(self, p0) -> np.ndarray:
-        """``EquilibriumSolver.var_scale`` at the reference whose kinematics ``self.data`` holds:
-        prismatic coordinates by the size of the chain, revolute ones by 1."""
+    def joint_origins(self, names, poses: np.ndarray) -> np.ndarray:
+        """(P, njoints − 1, 3) world positions of the joint origins (Pinocchio's ``data.oMi[1:]``
+        translations) at the ``poses`` (P, n) of the joints ``names``, the other joints at the
+        reference, by stacked forward kinematics (:meth:`_origin_plan`) instead of one Pinocchio
+        call and njoints SE3 conversions per pose."""
+        steps, groups = self._origin_plan(names)
+        p = poses.shape[0]
+        rot = {0: None}  # None: the identity (the universe)
+        pos = {0: np.zeros((p, 3))}
+        out = np.empty((p, self.model.njoints - 1, 3))
+        for j, a, rp, tp, axis, pr, c in steps:
+            ra, ta = rot[a], pos[a]
+            r = rp if ra is None else _mm(ra, rp)
+            t = ta + (tp if ra is None else _mm(ra, tp[:, None])[..., 0])
+            q = poses[:, c]
+            if pr:
+                t = t + (_mm(r, axis[:, None])[..., 0]) * q[:, None]
+                r = np.broadcast_to(r, (p, 3, 3))
+            else:
+                r = _mm(r, _rotations(axis, q))
+            rot[j], pos[j] = r, t
+            out[:, j - 1] = t
+        for a, idx, c in groups:
+            ra = rot[a]
+            out[:, idx] = pos[a][:, None, :] + (c.T[None] if ra is None else np.swapaxes(_mm(ra, c), 1, 2))
+        return out
+
+    def _var_scale(self, names, poses: np.ndarray, p0: np.ndarray) -> np.ndarray:
+        """(P, n) ``EquilibriumSolver.var_scale`` at the reference of each pose, whose end position
+        is ``p0``: prismatic coordinates by the size ``L_c`` of the chain (largest distance of a
+        joint origin from the end, at least 1 mm), revolute ones by 1."""
         if not self.prism.any():
-            return np.ones(len(self.free))
-        pts = [o.translation for o in self.data.oMi[1:]] + [p0]
-        lc = max(max(np.linalg.norm(p - p0) for p in pts), 1e-3)
-        return np.where(self.prism, lc, 1.0)
-
-    def _jacobian(self, x):
-        model, data, fid = self.model, self.data, self.fid
-        pin.computeJointJacobians(model, data, x)
-        pin.updateFramePlacement(model, data, fid)
-        jac = pin.getFrameJacobian(model, data, fid, pin.LOCAL_WORLD_ALIGNED).reshape(6, model.nv)
-        m = data.oMf[fid]
-        return jac[:, self.free], m.translation.copy(), m.rotation.copy()
+            return np.ones((poses.shape[0], len(self.free)))
+        d = self.joint_origins(names, poses) - p0[:, None, :]
+        lc = np.maximum(np.sqrt((d * d).sum(axis=2)).max(axis=1), 1e-3)
+        return np.where(self.prism[None, :], lc[:, None], 1.0)
 
     # ------------------------------------------------------------------ batch
     def psi_hessian(self, jac: np.ndarray, wrench: np.ndarray) -> np.ndarray:
@@ -135,51 +209,75 @@ class BatchedChain:
             return np.where(self.mask, ut + _mm(np.swapaxes(e, 1, 2), w), u)
         return np.where(self.mask, ut, u)
 
-    def solve(self, names, poses: np.ndarray, wrench: np.ndarray) -> list:
-        """Rows (dicts of :func:`vjm_pin.analysis.maps.evaluate_pose`) of the ``poses`` (P, n) of
-        the joints ``names`` under the end ``wrench`` (6,); ``None`` for a pose handed back to the
-        per-pose path (module docstring)."""
-        poses = np.asarray(poses, float)
+    def _start(self, names, poses: np.ndarray):
+        """(x (P, nq), θ₀ (P, n)): the reference and spring rest values of each pose."""
+        vm = self.vm
         npose = poses.shape[0]
+        x = np.repeat(vm.reference[None, :], npose, axis=0)
+        th0 = np.repeat(vm.theta0[None, :], npose, axis=0)
+        for c, n in enumerate(names):
+            x[:, self.index[n]] = poses[:, c]
+            k = self.theta_pos.get(n)
+            if k is not None:
+                th0[:, k] = poses[:, c]
+        return x, th0
+
+    def _evaluate(self, xa: np.ndarray):
+        """(A, 6, n) end-frame Jacobians (``LOCAL_WORLD_ALIGNED``, free columns) and (A, 4, 4) end
+        placements at the configurations ``xa``: one Pinocchio call per pose."""
+        model, data, fid = self.model, self.data, self.fid
+        cfj, lwa, omf = pin.computeFrameJacobian, pin.LOCAL_WORLD_ALIGNED, data.oMf
+        ja = np.empty((xa.shape[0], 6, model.nv))
+        ha = np.empty((xa.shape[0], 4, 4))
+        for k, xi in enumerate(xa):
+            ja[k] = cfj(model, data, xi, fid, lwa)  # also sets data.oMf[fid]
+            ha[k] = omf[fid].homogeneous
+        return (ja if self.all_free else ja[:, :, self.free]), ha
+
+    def solve_arrays(self, names, poses: np.ndarray, wrench: np.ndarray):
+        """The indices of :mod:`vjm_pin.analysis.maps` at the ``poses`` (P, n) of the joints
+        ``names`` under the end ``wrench`` (6,), as stacked arrays.
+
+        Returns:
+            (keep, p0, deflection, k_along, k_min): (P,) bool, False for a pose handed back to the
+            per-pose path (module docstring; its other entries are NaN); (P, 3) unloaded end
+            positions (m); (P, 6) deflections (m, rad); (P,) stiffness along the force and
+            weakest translational stiffness (N/m). A kept pose is stable with status ``ok``.
+        """
+        poses = np.asarray(poses, float)
         n = len(self.free)
+        block = max(BLOCK_MIN, min(BLOCK_MAX, BLOCK_ENTRIES // max(n * n, 1)))
+        if poses.shape[0] > block:  # blocks whose (P, n, n) temporaries stay in cache
+            parts = [self.solve_arrays(names, poses[i : i + block], wrench) for i in range(0, poses.shape[0], block)]
+            return tuple(np.concatenate(a) for a in zip(*parts))
+        npose = poses.shape[0]
         w = np.asarray(wrench, float)
-        wt = w[self.task]
         ti = self.free
-        x = np.empty((npose, self.model.nq))
-        th0 = np.empty((npose, n))
-        p0 = np.empty((npose, 3))
-        r0 = np.empty((npose, 3, 3))
-        var = np.empty((npose, n))
-        for i in range(npose):
-            x[i], th0[i] = self._start(names, poses[i])
+        x, th0 = self._start(names, poses)
         jac = np.empty((npose, 6, n))
-        pos = np.empty((npose, 3))
-        rot = np.empty((npose, 3, 3))
+        hom = np.empty((npose, 4, 4))
+        p0 = np.empty((npose, 3))
+        var = np.ones((npose, n))
         polish = np.zeros(npose, int)
         kkt_prev = np.full(npose, np.inf)
-        done = np.zeros(npose, bool)  # converged: x, jac, pos, rot are the equilibrium's
-        failed = np.zeros(npose, bool)
+        done = np.zeros(npose, bool)  # converged: x, jac, hom, amat are the equilibrium's
+        amat = np.empty((npose, n, n))
+        csol = np.empty((npose, len(self.task), len(self.task)))  # C at the equilibrium, when solved
+        have_x = np.zeros(npose, bool)
         active = np.arange(npose)
         it = 0
         while active.size:
-            for i in active:
-                jac[i], pos[i], rot[i] = self._jacobian(x[i])
-                if it == 0:  # x is the unloaded reference: its end placement is p0, R0
-                    p0[i], r0[i], var[i] = pos[i], rot[i], self._var_scale(pos[i])
-            ja = jac[active]
-            jt = ja[:, self.task]  # (A, m, n) task rows
-            tau = _mm(self.K, (x[active][:, ti] - th0[active])[:, :, None])[:, :, 0]
-            load_g = _mm(wt[None, None, :], jt)[:, 0, :]
-            r = tau - load_g
-            rs = np.abs(r).max(axis=1)
-            stat = np.maximum(np.maximum(np.abs(tau).max(axis=1), np.abs(load_g).max(axis=1)), 1e-6 * self.kscale)
-            conv = rs <= TOL * stat
-            wm = self.K - self.psi_hessian(ja, w)
-            with np.errstate(all="ignore"):
-                try:
-                    dx = -np.linalg.solve(wm, r[:, :, None])[:, :, 0]
-                except np.linalg.LinAlgError:  # one singular matrix: solve one by one
-                    dx = np.array([_solve_or_nan(a, b) for a, b in zip(wm, r)])
+            ja, ha = self._evaluate(x[active])
+            jac[active], hom[active] = ja, ha
+            if it == 0:  # x is the unloaded reference: its end placement is p0, R0
+                p0[:] = ha[:, :3, 3]
+                r0 = ha[:, :3, :3].copy()
+                var = self._var_scale(names, poses, p0)
+            # the residual r = K(θ − θ₀) − Jᵀw (eq. 5), its convergence test, K − H and the Newton
+            # step; where converged (a candidate to finish) also C = J (K − H)⁻¹ Jᵀ for the
+            # indices, from the same factorisation
+            r, rs, stat, conv, wm, dx, xa = self._system(ja, x[active][:, ti] - th0[active], w)
+            conv0 = conv
             finite = np.all(np.isfinite(dx), axis=1)
             step = np.abs(dx / var[active]).max(axis=1)
             small = step <= POLISH_STEP
@@ -199,52 +297,125 @@ class BatchedChain:
             flush_tiny(xs)
             x[idx] = xs
             done[active[finish]] = True
-            failed[active[fail]] = True
+            amat[active[finish]] = wm[finish]  # K − H at the equilibrium, for the indices
+            fx = finish & conv0
+            csol[active[fx]] = xa[fx]
+            have_x[active[fx]] = True
             active = idx
             it += 1
-        return self._rows(done, x, jac, pos, rot, p0, r0, w)
+        return self._indices(done, jac, hom, amat, csol, have_x, p0, r0, w)
 
-    def _rows(self, done, x, jac, pos, rot, p0, r0, w) -> list:
-        rows: list = [None] * len(done)
-        ok = np.flatnonzero(done)
-        if not ok.size:
-            return rows
-        ja = jac[ok]
-        a = self.K - self.psi_hessian(ja, w)
-        ev = np.linalg.eigvalsh(0.5 * (a + np.swapaxes(a, 1, 2)))
-        clear = ev[:, 0] > STABLE_MARGIN * self.knorm
+    def _system(self, ja, dth, w):
+        """One Newton iteration's algebra for the stacked (A, 6, n) Jacobians ``ja`` at the spring
+        deflections ``dth = θ − θ₀`` (A, n) under the end wrench ``w``: the residual
+        ``r = K dθ − J_tᵀ w_t`` (eq. 5), ``|r|∞``, its scale ``max(|K dθ|∞, |J_tᵀ w_t|∞, 1e-6 max|K|)``,
+        the convergence test ``|r|∞ ≤ TOL · scale``, ``K − H`` (A, n, n), the Newton step
+        ``−(K − H)⁻¹ r`` (A, n; NaN where ``K − H`` is singular) and, where converged, the task
+        compliance ``C = J_t (K − H)⁻¹ J_tᵀ`` (A, m, m): by the compiled kernel (:func:`kernel`) or
+        its numpy twin (the same operations in the same order up to the factorisation: Cholesky in
+        the kernel when ``K − H`` is symmetric positive definite, LU in the twin)."""
+        a, n, m = ja.shape[0], ja.shape[2], len(self.task)
+        wt = w[self.task]
+        floor = 1e-6 * self.kscale
+        if self.jit:
+            out = (np.empty((a, n)), np.empty(a), np.empty(a), np.empty(a, bool), np.empty((a, n, n)), np.empty((a, n)),
+                   np.empty((a, m, m)))  # fmt: skip
+            f, mo = w[:3], w[3:]
+            kernel()(np.ascontiguousarray(ja), np.ascontiguousarray(dth), self.K, wt, TOL, floor, _skew_t(f), _skew_t(mo),
+                     bool(np.any(mo)), self.k_symmetric and not np.any(mo), self.mask, self.task, *out)  # fmt: skip
+            return out
+        jt = ja[:, self.task]  # (A, m, n) task rows
+        tau = _mm(self.K, dth[:, :, None])[:, :, 0]
+        load_g = _mm(wt[None, None, :], jt)[:, 0, :]
+        r = tau - load_g
+        rs = np.abs(r).max(axis=1)
+        stat = np.maximum(np.maximum(np.abs(tau).max(axis=1), np.abs(load_g).max(axis=1)), floor)
+        conv = rs <= TOL * stat
+        wm = self.K - self.psi_hessian(ja, w)
+        dx = np.empty(r.shape)
+        cm = np.full((a, m, m), np.nan)
+        with np.errstate(all="ignore"):
+            for sel, rhs in ((conv, np.concatenate([-r[:, :, None], np.swapaxes(jt, 1, 2)], axis=2)), (~conv, -r[:, :, None])):
+                if not sel.any():
+                    continue
+                aa, bb = wm[sel], rhs[sel]
+                try:
+                    sol = np.linalg.solve(aa, bb)
+                except np.linalg.LinAlgError:  # one singular matrix: solve one by one
+                    sol = np.stack([_solve_or_nan(x, y) for x, y in zip(aa, bb)])
+                dx[sel] = sol[:, :, 0]
+                if sol.shape[2] > 1:
+                    cm[sel] = _mm(jt[sel], sol[:, :, 1:])
+        return r, rs, stat, conv, wm, dx, cm
+
+    def _indices(self, done, jac, hom, amat, csol, have_x, p0, r0, w):
+        npose = len(done)
+        keep = np.zeros(npose, bool)
+        defl = np.full((npose, 6), np.nan)
+        k_along = np.full(npose, np.nan)
+        k_min = np.full(npose, np.nan)
         tt = [i for i, c in enumerate(self.task) if c < 3]
-        if not tt:
-            return rows
+        ok = np.flatnonzero(done)
+        if not ok.size or not tt:
+            return keep, p0, defl, k_along, k_min
+        ja = jac[ok]
+        a = amat[ok]
+        # H is symmetric under a force alone (screw form: both triangles from the same products)
+        sym = self.k_symmetric and not np.any(w[3:])
+        tau = STABLE_MARGIN * self.knorm
+        if self.jit:
+            clear = np.empty(len(ok), bool)
+            _KERNEL_CLEAR(a, tau, sym, clear)
+        else:
+            sa = a.copy() if sym else 0.5 * (a + np.swapaxes(a, 1, 2))
+            diag = np.arange(a.shape[1])
+            sa[:, diag, diag] -= tau
+            clear = _positive_definite(sa)
         jt = ja[:, self.task]
         with np.errstate(all="ignore"):
-            try:
-                c = _mm(jt, np.linalg.solve(a, np.swapaxes(jt, 1, 2)))
-            except np.linalg.LinAlgError:
-                c = _mm(jt, np.stack([_solve_or_nan(aa, jj.T) for aa, jj in zip(a, jt)]))
-        finite = np.all(np.isfinite(c), axis=(1, 2))
-        cond = np.full(len(ok), np.inf)
-        cond[finite] = np.linalg.cond(c[finite])
-        keep = clear & finite & (cond < MAX_COND)
+            c = csol[ok]
+            late = ~have_x[ok]  # converged by a negligible step alone: not solved yet
+            if late.any():
+                c[late] = _mm(jt[late], np.stack([_solve_or_nan(aa, jj.T) for aa, jj in zip(a[late], jt[late])]))
+            finite = np.all(np.isfinite(c), axis=(1, 2))
+            c[~finite] = np.eye(c.shape[1])
+            keep_ok = clear & finite & (_equilibrated_cond(c) < MAX_COND)
         ctt = c[:, tt][:, :, tt]
         lam = np.linalg.eigvalsh(0.5 * (ctt + np.swapaxes(ctt, 1, 2)))[:, -1]
         f = w[self.task][tt]
         nf = np.linalg.norm(f)
-        fh = f / nf if nf > 0 else None
-        along = _mm(_mm(fh[None, None, :], ctt), fh[None, :, None])[:, 0, 0] if fh is not None else None
-        for j in np.flatnonzero(keep):
-            i = ok[j]
-            rows[i] = {
+        sel = ok[keep_ok]
+        keep[sel] = True
+        if nf > 0:
+            fh = f / nf
+            along = _mm(_mm(fh[None, None, :], ctt), fh[None, :, None])[:, 0, 0]
+            k_along[sel] = 1.0 / along[keep_ok]
+        k_min[sel] = 1.0 / lam[keep_ok]
+        h = hom[sel]
+        defl[sel, :3] = h[:, :3, 3] - p0[sel]
+        defl[sel, 3:] = log3_stacked(_mm(h[:, :3, :3], np.swapaxes(r0[sel], 1, 2)))
+        return keep, p0, defl, k_along, k_min
+
+    def solve(self, names, poses: np.ndarray, wrench: np.ndarray) -> list:
+        """:meth:`solve_arrays` as rows (dicts of :func:`vjm_pin.analysis.maps.evaluate_pose`);
+        ``None`` for a pose handed back to the per-pose path."""
+        keep, p0, defl, k_along, k_min = self.solve_arrays(names, poses, wrench)
+        return [
+            {
                 "p0": p0[i].copy(),
-                "deflection": deflection(p0[i], r0[i], pos[i], rot[i]),
-                "k_along": float(1.0 / along[j]) if along is not None else math.nan,
-                "k_min": float(1.0 / lam[j]),
+                "deflection": defl[i].copy(),
+                "k_along": float(k_along[i]),
+                "k_min": float(k_min[i]),
                 "stable": True,
                 "status": "ok",
             }
-        return rows
+            if keep[i]
+            else None
+            for i in range(len(keep))
+        ]
 
 
+# ----------------------------------------------------------------------------- stacked algebra
 def _mm(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """``a @ b`` on stacked small matrices (broadcast over the leading axes) as a sequence of
     elementwise products and sums over the contraction index, in index order. Unlike ``@``
@@ -257,6 +428,230 @@ def _mm(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return acc
 
 
+def _rotations(axis: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """(P, 3, 3) rotations by the angles ``q`` (P,) about the unit ``axis`` (Rodrigues)."""
+    k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+    return np.eye(3) + np.sin(q)[:, None, None] * k + (1.0 - np.cos(q))[:, None, None] * (k @ k)
+
+
+def log3_stacked(r: np.ndarray) -> np.ndarray:
+    """(P, 3) rotation vectors ``log3(R)`` of the stacked rotations ``r`` (P, 3, 3): axis times
+    angle, ``θ/(2 sin θ) · vee(R − Rᵀ)`` with ``θ = atan2(|vee|/2, (tr R − 1)/2)`` (the series
+    ``1 + θ²/6`` for θ < 1e-4); angles above :data:`LOG3_STACKED_MAX` by ``pin.log3``."""
+    v = np.stack([r[:, 2, 1] - r[:, 1, 2], r[:, 0, 2] - r[:, 2, 0], r[:, 1, 0] - r[:, 0, 1]], axis=1)
+    s = 0.5 * np.sqrt((v * v).sum(axis=1))
+    cth = 0.5 * (r[:, 0, 0] + r[:, 1, 1] + r[:, 2, 2] - 1.0)
+    th = np.arctan2(s, cth)
+    with np.errstate(all="ignore"):
+        fac = np.where(th < 1e-4, 0.5 * (1.0 + th * th / 6.0), 0.5 * th / s)
+    out = fac[:, None] * v
+    for i in np.flatnonzero(th > LOG3_STACKED_MAX):
+        out[i] = pin.log3(np.ascontiguousarray(r[i]))
+    return out
+
+
+def _positive_definite(s: np.ndarray) -> np.ndarray:
+    """(P,) whether each stacked symmetric matrix is positive definite (its Cholesky factorisation
+    exists); one LAPACK call per matrix, one by one when the stacked call fails on one."""
+    try:
+        np.linalg.cholesky(s)
+        return np.ones(s.shape[0], bool)
+    except np.linalg.LinAlgError:
+        out = np.zeros(s.shape[0], bool)
+        for i, m in enumerate(s):
+            try:
+                np.linalg.cholesky(m)
+                out[i] = True
+            except np.linalg.LinAlgError:
+                pass
+        return out
+
+
+def _equilibrated_cond(c: np.ndarray) -> np.ndarray:
+    """(P,) upper bounds of the 2-norm condition numbers of the stacked compliances ``c`` (P, m, m)
+    equilibrated as their inverse ``K = c⁻¹`` is by
+    :func:`~vjm_pin.analysis.indices.weakest_translation` (``S = diag(d) K diag(d)``,
+    ``d = 1/√(max row of max(|K|, |K|ᵀ))``): ``‖S⁻¹‖_F ‖S‖_F ≥ cond₂(S)`` (at most m times it), with
+    ``S⁻¹ = c / (d dᵀ)``: no SVD."""
+    with np.errstate(all="ignore"):
+        try:
+            k = np.linalg.inv(c)
+        except np.linalg.LinAlgError:
+            k = np.stack([_solve_or_nan(m, np.eye(c.shape[1])) for m in c])
+        a = np.abs(k)
+        rmax = np.maximum(a, np.swapaxes(a, 1, 2)).max(axis=2)
+        d = 1.0 / np.sqrt(np.where(rmax == 0, 1.0, rmax))
+        dd = d[:, :, None] * d[:, None, :]
+        s, si = k * dd, c / dd
+        cond = np.sqrt((s * s).sum(axis=(1, 2)) * (si * si).sum(axis=(1, 2)))
+    cond[~np.isfinite(cond)] = np.inf
+    return cond
+
+
+def _skew_t(v) -> np.ndarray:
+    """``[v]×ᵀ`` (3, 3): ``_skew_t(f) @ a = a × f``, the factor of the screw-form Hessian."""
+    x, y, z = (float(c) for c in v)
+    return np.array([[0.0, z, -y], [-z, 0.0, x], [y, -x, 0.0]])
+
+
+def _cholesky_loops(a, shift, lo):  # pragma: no cover - compiled
+    """Lower Cholesky factor of ``a − shift·I`` (symmetric, lower triangle read) into ``lo``;
+    False when it is not positive definite."""
+    n = a.shape[0]
+    for j in range(n):
+        s = a[j, j] - shift
+        for k in range(j):
+            s -= lo[j, k] * lo[j, k]
+        if not s > 0.0:
+            return False
+        dj = np.sqrt(s)
+        lo[j, j] = dj
+        for i in range(j + 1, n):
+            t = a[i, j]
+            for k in range(j):
+                t -= lo[i, k] * lo[j, k]
+            lo[i, j] = t / dj
+    return True
+
+
+def _clear_loops(a, tau, sym, out):  # pragma: no cover - compiled
+    """The compiled :func:`_positive_definite` of ``sym(a) − τ I`` for the stacked ``a`` (the lower
+    triangle of ``a`` itself when ``sym``)."""
+    npose, n, _ = a.shape
+    s = np.empty((n, n))
+    lo = np.zeros((n, n))
+    for p in range(npose):
+        for i in range(n):
+            for j in range(i + 1):
+                s[i, j] = a[p, i, j] if sym else 0.5 * (a[p, i, j] + a[p, j, i])
+        out[p] = _cholesky_loops(s, tau, lo)
+
+
+def _system_loops(ja, dth, K, wt, tol, floor, sf, sm, moment, sym, mask, task, r, rs, stat, conv, wm, dx, cm):  # pragma: no cover - compiled
+    """The compiled twin of :meth:`BatchedChain._system`, one pose at a time: the residual, its
+    test and ``K − H`` by explicit loops (the same operations in the same order as the numpy
+    twin); the step (and where converged ``C = J (K − H)⁻¹ Jᵀ = YᵀY``, ``Y = L⁻¹Jᵀ``) by a Cholesky
+    factorisation ``LLᵀ`` when ``K − H`` is symmetric (a force alone) and positive definite, else
+    LAPACK ``dgesv`` (numba's ``np.linalg.solve``). A singular ``K − H`` gives NaN."""
+    npose, _, n = ja.shape
+    m = task.shape[0]
+    d = np.empty((3, n))
+    e = np.empty((3, n))
+    lo = np.zeros((n, n))
+    for p in range(npose):
+        big_t = 0.0
+        big_l = 0.0
+        big_r = 0.0
+        for i in range(n):
+            t = K[i, 0] * dth[p, 0]
+            for k in range(1, n):
+                t = t + K[i, k] * dth[p, k]
+            g = wt[0] * ja[p, task[0], i]
+            for c in range(1, m):
+                g = g + wt[c] * ja[p, task[c], i]
+            r[p, i] = t - g
+            big_t = max(big_t, abs(t))
+            big_l = max(big_l, abs(g))
+            big_r = max(big_r, abs(r[p, i]))
+        rs[p] = big_r
+        stat[p] = max(max(big_t, big_l), floor)
+        conv[p] = big_r <= tol * stat[p]
+        for k in range(3):
+            for j in range(n):
+                d[k, j] = sf[k, 0] * ja[p, 0, j] + sf[k, 1] * ja[p, 1, j] + sf[k, 2] * ja[p, 2, j]
+                e[k, j] = sm[k, 0] * ja[p, 3, j] + sm[k, 1] * ja[p, 4, j] + sm[k, 2] * ja[p, 5, j]
+        for i in range(n):
+            for j in range(n):
+                if mask[i, j]:
+                    h = ja[p, 3, j] * d[0, i] + ja[p, 4, j] * d[1, i] + ja[p, 5, j] * d[2, i]
+                    if moment:
+                        h = h + (e[0, i] * ja[p, 3, j] + e[1, i] * ja[p, 4, j] + e[2, i] * ja[p, 5, j])
+                else:
+                    h = ja[p, 3, i] * d[0, j] + ja[p, 4, i] * d[1, j] + ja[p, 5, i] * d[2, j]
+                wm[p, i, j] = K[i, j] - h
+        nr = 1 + m if conv[p] else 1
+        rhs = np.empty((n, nr))
+        for i in range(n):
+            rhs[i, 0] = -r[p, i]
+            for c in range(1, nr):
+                rhs[i, c] = ja[p, task[c - 1], i]
+        sol = np.full((n, nr), np.nan)
+        if sym and _cholesky_loops(wm[p], 0.0, lo):
+            for c in range(nr):  # L y = b; the step also Lᵀ x = y
+                for i in range(n):
+                    t = rhs[i, c]
+                    for k in range(i):
+                        t -= lo[i, k] * sol[k, c]
+                    sol[i, c] = t / lo[i, i]
+                if c == 0:
+                    for i in range(n - 1, -1, -1):
+                        t = sol[i, 0]
+                        for k in range(i + 1, n):
+                            t -= lo[k, i] * sol[k, 0]
+                        sol[i, 0] = t / lo[i, i]
+            for a in range(nr - 1):  # C = J (LLᵀ)⁻¹ Jᵀ = YᵀY, Y = L⁻¹ Jᵀ
+                for b in range(nr - 1):
+                    t = 0.0
+                    for i in range(n):
+                        t += sol[i, a + 1] * sol[i, b + 1]
+                    cm[p, a, b] = t
+        else:
+            try:
+                sol = np.linalg.solve(wm[p], rhs)
+            except Exception:  # noqa: BLE001, S110 - a singular matrix: NaN, as the numpy twin
+                pass
+            for a in range(nr - 1):  # C = J (K − H)⁻¹ Jᵀ
+                for b in range(nr - 1):
+                    t = 0.0
+                    for i in range(n):
+                        t += ja[p, task[a], i] * sol[i, b + 1]
+                    cm[p, a, b] = t
+        for i in range(n):
+            dx[p, i] = sol[i, 0]
+
+
+_KERNEL = None
+_KERNEL_CLEAR = None
+
+
+def kernel():
+    """The compiled :func:`_system_loops` (numba, machine code cached on disk next to this file),
+    or None when numba cannot be imported. Loaded once per process."""
+    global _KERNEL, _KERNEL_CLEAR
+    if _KERNEL is None:
+        try:
+            import numba
+        except Exception:  # noqa: BLE001 - any import failure: the numpy twin
+            _KERNEL = False
+        else:
+            global _cholesky_loops
+            _cholesky_loops = numba.njit(cache=True, nogil=True)(_cholesky_loops)
+            _KERNEL = numba.njit(cache=True, nogil=True)(_system_loops)
+            _KERNEL_CLEAR = numba.njit(cache=True, nogil=True)(_clear_loops)
+    return _KERNEL or None
+
+
+def warm_kernel() -> None:
+    """Compile (or load from the disk cache) the kernel now, on a 1-joint problem of the types
+    the solves use: a process that forks its workers afterwards hands them the machine code."""
+    fn = kernel()
+    if fn is not None:
+        z, e = np.zeros, np.empty
+        fn(z((1, 6, 1)), z((1, 1)), np.ones((1, 1)), z(1), TOL, 1.0, z((3, 3)), z((3, 3)), False, True,
+           np.ones((1, 1), bool), z(1, np.int64), e((1, 1)), e(1), e(1), e(1, bool), e((1, 1, 1)), e((1, 1)),
+           e((1, 1, 1)))  # fmt: skip
+        _KERNEL_CLEAR(np.ones((1, 1, 1)), 0.0, True, e(1, bool))
+
+
+def jit_available() -> bool:
+    """Whether maps use the compiled kernel: numba importable and ``VJM_PIN_JIT`` not ``0``
+    (:func:`vjm_pin.solver.kernel.mode`). Decided once per map in the calling process and passed
+    to every worker, so all chunks of a map take the same arithmetic."""
+    from vjm_pin.solver.kernel import mode
+
+    return mode() != "0" and kernel() is not None
+
+
 def _solve_or_nan(a, b):
     try:
         return np.linalg.solve(a, b)
@@ -267,12 +662,14 @@ def _solve_or_nan(a, b):
 _CHAIN_CACHE: dict = {}
 
 
-def shared_chain(vm: VjmModel) -> BatchedChain:
-    """This thread's :class:`BatchedChain` of ``vm`` (one ``pin.Data`` per worker thread)."""
+def shared_chain(vm: VjmModel, jit: bool = False) -> BatchedChain:
+    """This thread's :class:`BatchedChain` of ``vm`` (one ``pin.Data`` per worker thread), using the
+    compiled kernel when ``jit``."""
     key = (id(vm), threading.get_ident())
     hit = _CHAIN_CACHE.get(key)
     if hit is None or hit.vm is not vm:
         if len(_CHAIN_CACHE) >= 8:
             _CHAIN_CACHE.clear()
         hit = _CHAIN_CACHE[key] = BatchedChain(vm)  # holds vm: its id stays unique
+    hit.jit = bool(jit)
     return hit

@@ -282,6 +282,9 @@ def _local_cluster(workers: int):
         silence_logs=logging.ERROR,
     )
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+    # no statistical profiler in the workers (a stack sample every 10 ms: about as much CPU per
+    # pose as the pose itself on a loaded 2-core machine, issue 14); the environment may turn it on
+    env.setdefault("DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED", "False")
     cmd = [
         sys.executable, "-m", "distributed.cli.dask_worker", cluster.scheduler_address,
         "--nthreads", "1", "--no-nanny", "--no-dashboard", "--death-timeout", "10",

@@ -11,12 +11,15 @@ Models of every kind. A serial chain is evaluated at the joint values of the pos
 end only (ur5 with actuator or link springs) has all poses of a chunk solved in lockstep
 (:mod:`vjm_pin.analysis.batched`: the same Newton iteration on stacked arrays, one Pinocchio
 Jacobian per pose per iteration; poses it cannot vouch for go to the per-pose path, and each
-pose's numbers do not depend on its chunk, so the backends still agree bit for bit). A mechanism with loop closures (a four-bar, the
+pose's numbers do not depend on its chunk, so the backends still agree bit for bit). From
+:data:`JIT_MIN_POSES` poses on, such a map uses the compiled kernels (numba; ``VJM_PIN_JIT=0``:
+never), a choice made once per map and passed to every worker. A worker sends its chunk back as
+columns (:class:`PoseRows`). A mechanism with loop closures (a four-bar, the
 Orthoglide) is mapped over its **actuated** joints: at each pose it is first re-assembled
 (:mod:`vjm_pin.analysis.assembly`: passive joints found by continuation from the reference so
 that every closure holds, springs at rest), then loaded and solved by
 :class:`~vjm_pin.solver.mechanism.MechanismSolver`, the solver of ``analyze`` (its equilibrium,
-eq. 23 verdict and the bordered eq. 28 K_C). Dead loads anywhere (``loads``, ``--load``,
+eq. 23 verdict and the bordered eq. 28 K_C). Dead loads anywhere (``loads``; the CLI's ``--load``,
 ``--payload``) and link weights take the same mechanism path, as in ``analyze``.
 
 Output. :func:`run_map` returns the whole map (:class:`MapResult`); :func:`stream_map` writes
@@ -118,15 +121,15 @@ def sample_poses(vm: VjmModel, n: int, seed: int = 0, names=None) -> tuple[list[
             ≥ 0, or the model has no motor joint to vary.
     """
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-        raise InputError(f"--samples must be a positive integer, got {n!r}")
-    _check_count(int(n), "--samples")
+        raise InputError(f"n must be a positive integer (poses to sample), got {n!r}")
+    _check_count(int(n), "n")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise InputError(f"--seed must be an integer ≥ 0, got {seed!r}")
+        raise InputError(f"seed must be an integer ≥ 0, got {seed!r}")
     names = list(names or mapped_joints(vm))
     if not names:
         raise InputError(
             f"model '{vm.name}' has no actuated joint with an actuator spring to sample; "
-            "give the joints to vary with --grid NAME=LO:HI:N"
+            "give the joints to vary (names, or a grid of poses: grid_poses)"
         )
     lim = joint_limits(vm, names)
     rng = np.random.default_rng(int(seed))
@@ -149,21 +152,21 @@ def parse_grid(items) -> dict[str, np.ndarray]:
             lo, hi, n = rng_.split(":")
             lo_f, hi_f, n_i = float(lo), float(hi), int(n)
         except ValueError:
-            raise InputError(f"--grid expects NAME=LO:HI:N (N an integer), got '{it}'") from None
+            raise InputError(f"grid item '{it}': expected NAME=LO:HI:N (N an integer)") from None
         if not name:
-            raise InputError(f"--grid '{it}': no joint name before '='")
+            raise InputError(f"grid item '{it}': no joint name before '='")
         if name in out:
-            raise InputError(f"--grid: joint '{name}' given twice")
+            raise InputError(f"grid: joint '{name}' given twice")
         if n_i < 1 or not (math.isfinite(lo_f) and math.isfinite(hi_f)):
-            raise InputError(f"--grid {name}: need finite bounds and N ≥ 1, got '{rng_}'")
+            raise InputError(f"grid {name}: need finite bounds and N ≥ 1, got '{rng_}'")
         if lo_f > hi_f:
-            raise InputError(f"--grid {name}: LO {lo_f:g} is above HI {hi_f:g}")
+            raise InputError(f"grid {name}: LO {lo_f:g} is above HI {hi_f:g}")
         if lo_f == hi_f and n_i > 1:
             raise InputError(
-                f"--grid {name}: LO = HI = {lo_f:g} gives {n_i} equal values; use N = 1"
+                f"grid {name}: LO = HI = {lo_f:g} gives {n_i} equal values; use N = 1"
             )
         total *= n_i
-        _check_count(total, "--grid")
+        _check_count(total, "grid")
         out[name] = np.linspace(lo_f, hi_f, n_i)
     return out
 
@@ -179,23 +182,23 @@ def grid_poses(vm: VjmModel, grid: dict) -> tuple[list[str], np.ndarray]:
     from vjm_pin.exceptions import RoleError
 
     if not grid:
-        raise InputError("--grid: no joint given (NAME=LO:HI:N ...)")
+        raise InputError("grid: no joint given (NAME=LO:HI:N ...)")
     total = 1
     for n, vals in grid.items():
         vm.joint_index(n)  # JointNotFound on an unknown name
         if vm.roles[n] == "spring":
             raise RoleError(
-                f"--grid {n}: a virtual spring joint cannot be set (its position is its rest value)"
+                f"grid {n}: a virtual spring joint cannot be set (its position is its rest value)"
             )
         vals = np.asarray(vals, dtype=float).reshape(-1)
         lim = _urdf_limits(vm, n)
         if lim is not None and (vals.min() < lim[0] or vals.max() > lim[1]):
             raise InputError(
-                f"--grid {n}: values {vals.min():g} … {vals.max():g} leave the joint limits "
+                f"grid {n}: values {vals.min():g} … {vals.max():g} leave the joint limits "
                 f"[{lim[0]:g}, {lim[1]:g}] of the URDF"
             )
         total *= vals.size
-    _check_count(total, "--grid")
+    _check_count(total, "grid")
     names = list(grid)
     return names, np.array(list(itertools.product(*[grid[n] for n in names])), dtype=float).reshape(
         -1, len(names)
@@ -470,25 +473,91 @@ def stiffness_indices(k6: np.ndarray, wrench: np.ndarray, task) -> tuple[float, 
 _batching = True
 
 
-def _chunk_worker(text, names, wrench, gravity, method, loads, chunk):
-    """Evaluate a chunk of poses (runs in a worker process)."""
+def _chunk_worker(text, names, wrench, gravity, method, loads, jit, csv_text, chunk) -> PoseRows:
+    """Evaluate a chunk of poses (runs in a worker process); its rows as columns. ``jit``: the
+    map's choice of compiled kernels (:func:`_use_jit`), the same in every worker; ``csv_text``:
+    also the rows' CSV text (:func:`stream_map`: formatted by the workers, in parallel)."""
+    rows = _chunk_rows(text, names, wrench, gravity, method, loads, jit, chunk)
+    if csv_text:
+        rows.text = _csv_lines(_csv_floats(chunk, rows), rows.stable, np.asarray(STATUS)[rows.status])
+    return rows
+
+
+def _chunk_rows(text, names, wrench, gravity, method, loads, jit, chunk) -> PoseRows:
+    """The rows of a chunk (:func:`_chunk_worker`)."""
     from vjm_pin.analysis.batched import batch_applicable, shared_chain
     from vjm_pin.exceptions import VjmError
     from vjm_pin.solver.threads import single_blas_thread
 
     vm = _model_from_text(text)
     try:
+        if jit:  # the per-pose solver's compiled kernel too (vjm_pin.solver.kernel): one arithmetic
+            from vjm_pin.solver import kernel
+
+            if not kernel.load():
+                raise VjmError("this map needs numba in every worker (or VJM_PIN_JIT=0 everywhere)")
         with single_blas_thread():  # once per chunk, not per pose
             if _batching and batch_applicable(vm, gravity, loads):
                 # all poses of the chunk in lockstep; the few handed back take the per-pose path
-                rows = shared_chain(vm).solve(names, chunk, wrench)
-                return [
-                    r if r is not None else evaluate_pose(vm, names, row, wrench, gravity, method, loads)
-                    for r, row in zip(rows, chunk)
-                ]
-            return [evaluate_pose(vm, names, row, wrench, gravity, method, loads) for row in chunk]
+                keep, p0, defl, k_along, k_min = shared_chain(vm, jit).solve_arrays(names, chunk, wrench)
+                out = PoseRows(p0, defl, k_along, k_min, keep.copy(), np.zeros(len(keep), np.uint8))
+                for i in np.flatnonzero(~keep):
+                    out.put(i, evaluate_pose(vm, names, chunk[i], wrench, gravity, method, loads))
+                return out
+            return PoseRows.from_dicts([evaluate_pose(vm, names, row, wrench, gravity, method, loads) for row in chunk])
     except VjmError as e:  # subclasses with extra constructor arguments do not unpickle
         raise VjmError(str(e)) from None
+
+
+class PoseRows:
+    """The rows of one chunk of a map as columns (what a worker sends back: a few arrays to
+    pickle, not a dict per pose).
+
+    Attributes:
+        p0: (n, 3) m.
+        deflection: (n, 6) m, rad.
+        k_along: (n,) N/m.
+        k_min: (n,) N/m.
+        stable: (n,) bool.
+        status: (n,) uint8, index into :data:`STATUS`.
+        text: The rows as CSV lines for :func:`stream_map`, or None.
+    """
+
+    __slots__ = ("deflection", "k_along", "k_min", "p0", "stable", "status", "text")
+
+    def __init__(self, p0, deflection, k_along, k_min, stable, status, text=None):
+        self.p0, self.deflection, self.k_along, self.k_min = p0, deflection, k_along, k_min
+        self.stable, self.status = stable, status
+        self.text = text  # the rows as CSV text (streamed maps), or None
+
+    def __len__(self) -> int:
+        return len(self.status)
+
+    def put(self, i: int, row: dict) -> None:
+        """Set row ``i`` from a dict of :func:`evaluate_pose`."""
+        self.p0[i] = row["p0"]
+        self.deflection[i] = row["deflection"]
+        self.k_along[i] = row["k_along"]
+        self.k_min[i] = row["k_min"]
+        self.stable[i] = bool(row["stable"])
+        self.status[i] = STATUS.index(row["status"])
+
+    @classmethod
+    def empty(cls, n: int) -> PoseRows:
+        return cls(
+            np.full((n, 3), np.nan), np.full((n, 6), np.nan), np.full(n, np.nan), np.full(n, np.nan),
+            np.zeros(n, bool), np.zeros(n, np.uint8),
+        )  # fmt: skip
+
+    @classmethod
+    def from_dicts(cls, rows) -> PoseRows:
+        """The rows (dicts of :func:`evaluate_pose`) as columns; a :class:`PoseRows` as it is."""
+        if isinstance(rows, PoseRows):
+            return rows
+        out = cls.empty(len(rows))
+        for i, r in enumerate(rows):
+            out.put(i, r)
+        return out
 
 
 # ----------------------------------------------------------------------------- result
@@ -547,11 +616,12 @@ class MapResult:
         from vjm_pin.outputs import atomic_output
 
         cols = self.columns()
+        floats = [c for k, c in cols.items() if k not in ("stable", "status")]
         with atomic_output(path, "w") as fh:
-            wr = csv.writer(fh)
-            wr.writerow(list(cols))
-            for i in range(self.poses.shape[0]):
-                wr.writerow([_csv_value(c[i]) for c in cols.values()])
+            csv.writer(fh).writerow(list(cols))
+            for i in range(0, self.poses.shape[0], 10_000):  # the text of 10⁴ rows at a time
+                sl = slice(i, i + 10_000)
+                fh.write(_csv_lines(np.column_stack([c[sl] for c in floats]), self.stable[sl], self.status[sl]))
 
     def to_npz(self, path) -> None:
         """Write the arrays to a NumPy ``.npz`` archive at ``path`` (exactly that name),
@@ -653,14 +723,16 @@ def run_map(
     return out.result(vm, names, poses, w, g, np.ones(n_poses, dtype=bool), loads)
 
 
-#: Default poses per chunk of a map solved in lockstep (:mod:`vjm_pin.analysis.batched`): the
-#: per-iteration numpy work is shared by the chunk, so chunks are larger than the per-pose 50.
-BATCH_CHUNK = 400
+#: Default poses per chunk of a map solved in lockstep (:mod:`vjm_pin.analysis.batched`, which
+#: splits a chunk into cache-sized blocks itself): large enough that a task's fixed cost (a Dask
+#: task costs milliseconds of scheduler and client time) is a few % of its ~0.1–0.5 s of work.
+BATCH_CHUNK = 2000
 
 
-def _run_chunks(vm, names, poses, w, g, loads, method, backend, workers, scheduler, chunk, consume, progress):
+def _run_chunks(vm, names, poses, w, g, loads, method, backend, workers, scheduler, chunk, consume, progress, csv_text=False):
     """Evaluate the checked problem chunk by chunk; ``consume(start, rows)`` for each chunk in
-    the calling thread (completion order), ``progress(done)`` after it."""
+    the calling thread (completion order), ``progress(done)`` after it; ``csv_text``: the workers
+    also format the rows as CSV (:attr:`PoseRows.text`)."""
     from vjm_pin.analysis.batched import batch_applicable
     from vjm_pin.analysis.map_backends import run_chunks
 
@@ -669,6 +741,7 @@ def _run_chunks(vm, names, poses, w, g, loads, method, backend, workers, schedul
     n_poses = poses.shape[0]
     batched = _batching and batch_applicable(vm, g, loads)
     workers, chunk = _check_workers(workers, chunk, scheduler, n_poses, BATCH_CHUNK if batched else 50)
+    jit = _use_jit(batched, n_poses, backend)
     starts = list(range(0, n_poses, chunk))
     done = 0
 
@@ -681,13 +754,38 @@ def _run_chunks(vm, names, poses, w, g, loads, method, backend, workers, schedul
 
     run_chunks(
         _chunk_worker,
-        (vm.urdf, names, w, g, method, loads),
+        (vm.urdf, names, w, g, method, loads, jit, csv_text),
         [poses[i : i + chunk] for i in starts],
         report,
         backend=backend,
         workers=workers,
         scheduler=scheduler,
     )
+
+
+#: Batched maps of at least this many poses use the compiled kernels (numba): loading them costs
+#: ~1–2 s per process, which the faster poses repay from a few thousand poses on.
+JIT_MIN_POSES = 2000
+
+
+def _use_jit(batched: bool, n_poses: int, backend: str) -> bool:
+    """Whether this map's workers use the compiled kernels (:func:`vjm_pin.analysis.batched.kernel`
+    and :mod:`vjm_pin.solver.kernel`): a batched map of :data:`JIT_MIN_POSES` poses or more, numba
+    importable and ``VJM_PIN_JIT`` not ``0``. Decided once here and passed to every chunk, so all
+    poses of a map take the same arithmetic whatever the backend. For the local pool the kernels
+    are compiled (or loaded from the disk cache) before the workers are forked."""
+    if not (batched and n_poses >= JIT_MIN_POSES):
+        return False
+    from vjm_pin.analysis.batched import jit_available, warm_kernel
+
+    if not jit_available():
+        return False
+    if backend in ("serial", "local"):
+        from vjm_pin.solver import kernel
+
+        warm_kernel()
+        kernel.load()
+    return True
 
 
 # ----------------------------------------------------------------------------- streaming
@@ -772,15 +870,17 @@ class CsvStream:
             self.next += len(rows)
 
     def _write(self, start: int, rows) -> None:
-        d = np.array([r["deflection"] for r in rows], float).reshape(-1, 6)
-        dns = np.linalg.norm(d[:, :3], axis=1)  # as MapResult.columns: the same digits
-        rns = np.linalg.norm(d[:, 3:], axis=1)
-        for i, r, dn, rn in zip(range(start, start + len(rows)), rows, dns, rns):
-            self.writer.writerow(_csv_row(self.poses[i], r, dn, rn))
-            self.written[i] = True
-            self.status[i] = STATUS.index(r["status"])
-            self.stable[i] = bool(r["stable"])
-            self.mags[:, i] = (dn, rn, r["k_along"], r["k_min"])
+        r = PoseRows.from_dicts(rows)
+        sl = slice(start, start + len(r))
+        dns = np.linalg.norm(r.deflection[:, :3], axis=1)  # as MapResult.columns: the same digits
+        rns = np.linalg.norm(r.deflection[:, 3:], axis=1)
+        if r.text is None:
+            r.text = _csv_lines(_csv_floats(self.poses[sl], r), r.stable, np.asarray(STATUS)[r.status])
+        self.fh.write(r.text)
+        self.written[sl] = True
+        self.status[sl] = r.status
+        self.stable[sl] = r.stable
+        self.mags[:, sl] = (dns, rns, r.k_along, r.k_min)
 
     def commit(self) -> None:
         """Write the chunks still waiting (after an interrupt: the finished poses, in pose order,
@@ -837,7 +937,7 @@ def stream_map(
     names, poses, w, g, loads = _check_problem(vm, names, poses, wrench, gravity, loads)
     sink = CsvStream(path, names, poses)
     try:
-        _run_chunks(vm, names, poses, w, g, loads, method, backend, workers, scheduler, chunk, sink.add, progress)
+        _run_chunks(vm, names, poses, w, g, loads, method, backend, workers, scheduler, chunk, sink.add, progress, csv_text=True)
     except KeyboardInterrupt:
         if sink.next or sink.pending:
             sink.commit()  # the finished poses
@@ -882,19 +982,22 @@ def _csv_header(names) -> list[str]:
     ]  # fmt: skip
 
 
-def _csv_row(pose, r, dn, rn) -> list:
-    """One CSV row (the columns of :meth:`MapResult.columns`, the same text as :meth:`MapResult.to_csv`)."""
-    return [
-        *(_csv_value(np.float64(v)) for v in pose),
-        *(_csv_value(np.float64(v)) for v in r["p0"]),
-        *(_csv_value(np.float64(v)) for v in r["deflection"]),
-        _csv_value(np.float64(dn)),
-        _csv_value(np.float64(rn)),
-        _csv_value(np.float64(r["k_along"])),
-        _csv_value(np.float64(r["k_min"])),
-        _csv_value(np.bool_(r["stable"])),
-        r["status"],
-    ]
+def _csv_floats(poses: np.ndarray, r: PoseRows) -> np.ndarray:
+    """(n, k + 17) the float columns of the CSV rows of ``poses`` (n, k) and their results."""
+    d = r.deflection
+    dns = np.linalg.norm(d[:, :3], axis=1)  # as MapResult.columns: the same digits
+    rns = np.linalg.norm(d[:, 3:], axis=1)
+    return np.column_stack([poses, r.p0, d, dns, rns, r.k_along, r.k_min])
+
+
+def _csv_lines(floats: np.ndarray, stable: np.ndarray, status) -> str:
+    """CSV text of rows of float columns followed by ``stable`` (0/1) and ``status``: the same
+    text as ``csv.writer`` on :func:`_csv_value` of each field (``repr`` of the floats, ``\\r\\n``
+    line ends; no field needs quoting), built without a Python call per field."""
+    flags = np.where(np.asarray(stable, bool), "1", "0").tolist()
+    return "".join(
+        f"{','.join(map(repr, f))},{b},{st}\r\n" for f, b, st in zip(floats.tolist(), flags, list(status))
+    )
 
 
 def _check_problem(vm: VjmModel, names, poses, wrench, gravity, loads):
@@ -909,11 +1012,10 @@ def _check_problem(vm: VjmModel, names, poses, wrench, gravity, loads):
         )
     if not np.all(np.isfinite(poses)):
         raise InputError("poses contain NaN or infinite values")
-    w = np.asarray(wrench, float).reshape(-1)
-    if w.size == 3:
-        w = np.concatenate([w, np.zeros(3)])
-    if w.shape != (6,) or not np.all(np.isfinite(w)):
-        raise InputError(f"wrench must be 3 or 6 finite numbers, got {np.asarray(wrench).tolist()}")
+    from vjm_pin.model.task import task_vector
+
+    # 6 numbers, or 3 (a force; the moment zero); components outside the task are checked below
+    w = task_vector(wrench, name="wrench", unit="N, N·m", outside_task="keep")
     for n in names:
         vm.joint_index(n)
         if vm.roles[n] == "spring":
@@ -987,13 +1089,14 @@ class _Columns:
         self.status = np.full(n, "", dtype="<U16")
 
     def fill(self, start: int, rows) -> None:
-        for i, r in enumerate(rows, start):
-            self.p0[i] = r["p0"]
-            self.deflection[i] = r["deflection"]
-            self.k_along[i] = r["k_along"]
-            self.k_min[i] = r["k_min"]
-            self.stable[i] = r["stable"]
-            self.status[i] = r["status"]
+        r = PoseRows.from_dicts(rows)
+        sl = slice(start, start + len(r))
+        self.p0[sl] = r.p0
+        self.deflection[sl] = r.deflection
+        self.k_along[sl] = r.k_along
+        self.k_min[sl] = r.k_min
+        self.stable[sl] = r.stable
+        self.status[sl] = np.asarray(STATUS)[r.status]
 
     def result(self, vm, names, poses, w, g, mask, loads=()) -> MapResult:
         return MapResult(

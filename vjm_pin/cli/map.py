@@ -187,7 +187,7 @@ def _problem(args):
     from vjm_pin.analysis.maps import MAX_WORKERS_PER_CORE, grid_poses, parse_grid, sample_poses
     from vjm_pin.cli.analyze import load_from_args
     from vjm_pin.cli.common import check_output_option, finite_vector, loads_from_args
-    from vjm_pin.exceptions import InputError
+    from vjm_pin.exceptions import InputError, RoleError
     from vjm_pin.kinematics.dead_loads import STANDARD_GRAVITY, Load
     from vjm_pin.outputs import PLOT_EXTENSIONS
 
@@ -202,10 +202,15 @@ def _problem(args):
         if not np.isfinite(float(args.payload) * STANDARD_GRAVITY):
             raise InputError(f"--payload {args.payload:g} kg: its weight is not a finite force")
         loads = (*loads, Load.weight(vm.frame, args.payload))
-    if args.samples is not None:
-        names, poses = sample_poses(vm, args.samples, args.seed)
-    else:
-        names, poses = grid_poses(vm, parse_grid(args.grid))
+    try:
+        if args.samples is not None:
+            names, poses = sample_poses(vm, args.samples, args.seed)
+        else:
+            names, poses = grid_poses(vm, parse_grid(args.grid))
+    except (InputError, RoleError) as e:
+        if type(e) not in (InputError, RoleError):
+            raise
+        raise type(e)(_option_words(str(e))) from None
     if args.workers is not None and args.workers < 1:
         raise InputError(f"--workers must be positive, got {args.workers}")
     cores = os.cpu_count() or 1
@@ -220,6 +225,20 @@ def _problem(args):
             raise InputError("--scheduler needs the dask backend")
         _scheduler_option(check_scheduler, args.scheduler)
     return vm, names, poses, w, loads, backend
+
+
+def _option_words(message: str) -> str:
+    """A message of :func:`~vjm_pin.analysis.maps.sample_poses` / ``parse_grid`` / ``grid_poses``,
+    which name their parameters (``n``, ``seed``, ``grid``), in the words of this command's options."""
+    import re
+
+    for param, option in (("n", "--samples"), ("seed", "--seed"), ("grid", "--grid")):
+        m = re.match(rf"{param}\b(?: item)?", message)
+        if m:
+            return option + message[m.end() :]
+    if "give the joints to vary" in message:
+        return message.split(";")[0] + "; give the joints to vary with --grid NAME=LO:HI:N"
+    return message
 
 
 def _done_line(args, n: int, seconds: float) -> None:
