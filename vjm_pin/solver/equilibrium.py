@@ -71,6 +71,7 @@ from __future__ import annotations
 import copy
 import inspect
 import math
+from dataclasses import MISSING as _MISSING
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -83,6 +84,7 @@ from vjm_pin.exceptions import (
     NoEquilibrium,
     SingularStiffness,
 )
+from vjm_pin.kinematics import chain as _chain
 from vjm_pin.kinematics.chain import (
     Kinematics,
     KinematicState,
@@ -95,6 +97,7 @@ from vjm_pin.kinematics.chain import (
 from vjm_pin.kinematics.screw import psi_hessian_screw
 from vjm_pin.model.format import VjmModel
 from vjm_pin.model.task import task_vector
+from vjm_pin.solver import kernel as _kernel  # numpy only at import; numba when first needed
 from vjm_pin.solver.blocks import Blocks, evaluate_blocks, full_wrench, remember_blocks
 from vjm_pin.solver.lapack import lapack as _lapack
 from vjm_pin.solver.lapack import solve_triangular as _solve_triangular
@@ -230,6 +233,48 @@ class EquilibriumResult:
         return float(max(self.residuals.values())) if self.residuals else float("nan")
 
 
+_ZERO3 = np.zeros(3).tobytes()  # +0.0 exactly (not -0.0)
+_FROZEN_SPECS: dict = {}
+
+
+def _frozen(cls, **fields):
+    """``cls(**fields)`` for a frozen dataclass (no ``__post_init__``, no slots) without its
+    ``__init__``, which sets each field through ``object.__setattr__`` (~4× the cost; several
+    such objects per solve: the result, its stability verdict, the kept Blocks). Fields not
+    given take their defaults; the same object otherwise (``replace``, equality, pickling)."""
+    spec = _FROZEN_SPECS.get(cls)
+    if spec is None:
+        import dataclasses
+
+        ok = (dataclasses.is_dataclass(cls) and not hasattr(cls, "__post_init__")
+              and "__slots__" not in cls.__dict__)
+        spec = _FROZEN_SPECS[cls] = tuple(
+            (f.name, f.default, f.default_factory) for f in dataclasses.fields(cls) if f.init
+        ) if ok else False
+    if spec is False or len(fields) > len(spec):
+        return cls(**fields)
+    d = {}
+    for name, default, factory in spec:
+        if name in fields:
+            d[name] = fields[name]
+        elif default is not _MISSING:
+            d[name] = default
+        elif factory is not _MISSING:
+            d[name] = factory()
+        else:
+            return cls(**fields)  # a required field missing: the constructor's error
+    if any(k not in d for k in fields):
+        return cls(**fields)  # an unknown keyword: the constructor's error
+    obj = object.__new__(cls)
+    obj.__dict__.update(d)
+    return obj
+
+
+def _new_result(**fields) -> EquilibriumResult:
+    """``EquilibriumResult(**fields)`` (see :func:`_frozen`)."""
+    return _frozen(EquilibriumResult, **fields)
+
+
 def _singular_values(a: np.ndarray) -> np.ndarray:
     """Singular values of a small matrix (LAPACK ``gesdd`` directly; numpy's wrapper costs more)."""
     if a.size:
@@ -363,6 +408,8 @@ class EquilibriumSolver:
         self._hidx = (self.free[:, None] * nv + self.free[None, :]).ravel()
         self._smask = self.kin.support_mask(self.free) if hasattr(self.kin, "support_mask") else None
         self._all_task = self.task == [0, 1, 2, 3, 4, 5]
+        self._off_task = np.array([i for i in range(6) if i not in self.task], int)
+        self._r_unrotated = displace(self.p0, self.r0, np.zeros(6))[1]  # target rotation of a zero rotation part
         self._ip = np.array(self._rows_p, int)
         self._ir = np.array(self._rows_r, int)
         self._triu = np.triu(np.ones((len(self.task),) * 2))
@@ -556,11 +603,9 @@ class EquilibriumSolver:
         """:meth:`_fast_newton` for chains of 1-DoF joints (screw-form Hessian): per iteration one
         Pinocchio call (frame Jacobian and end placement) and one call of the fused kernel
         (:mod:`vjm_pin.solver.kernel`), with the same iterates, tests, caches and results."""
-        from vjm_pin.kinematics import chain
-        from vjm_pin.solver import kernel
-
+        chain, kernel = _chain, _kernel
         kin, m, n = self.kin, len(self.task), len(self.free)
-        model, fid, data = kin.model, kin.frame_id, kin.data
+        model, fid, data = kin.model, kin.frame_id, None  # data: kin.data when first needed
         step_fn = kernel.get()
         consts, thr = self._kernel_consts()
         pt = np.asarray(p_t, float)
@@ -587,6 +632,8 @@ class EquilibriumSolver:
                 kf = tuple(fact[3:10]) + (f6,)
                 j6, pos, rotm, refactor = dummy[8], st.position, st.rotation, False
             else:
+                if data is None:
+                    data = kin.data
                 j6 = pin.computeFrameJacobian(model, data, x, fid, lwa)
                 if j6.ndim != 2 or not j6.flags.c_contiguous:
                     j6 = np.ascontiguousarray(j6).reshape(6, nv)
@@ -607,19 +654,21 @@ class EquilibriumSolver:
             if status == kernel.RANK_FAIL:
                 return None
             if status == kernel.CONVERGED:
-                stab = StabilityResult(bool(ev.size == 0 or ev.max() < -thr), ev, n - m, thr)
+                stab = _frozen(StabilityResult, stable=bool(ev.size == 0 or ev.max() < -thr), eigenvalues=ev,
+                               null_dim=n - m, tolerance=thr)
                 if self.follow_stable and not stab.stable:
                     self._fast_its = it
                     return None
                 jac, qf, rr, f, r, tau, hz, f6 = kf
                 if st is None:
-                    st = KinematicState(pos.copy(), mo.rotation.copy(), j6, None)
+                    st = _frozen(KinematicState, position=pos.copy(), rotation=mo.rotation.copy(), jacobian=j6, hessian=None)
                     kin._last = (key, st)  # kin.evaluate(x, hessian=False) at this point: no Pinocchio call
                 res = {"position": float(ep), "orientation": float(er), "statics": float(rs)}
                 self._fast_cache = (key + f6.tobytes() + pt.tobytes() + rt.tobytes(), res, stab)
                 self._fast_fact = (key, kin, st, jac, qf, rr, f, r, tau, hz, step_fn)
                 nt, kt = self.nt, self.vm.K_theta
-                blocks = Blocks(jac[:, :nt], jac[:, nt:], hz[:nt, :nt], hz[:nt, nt:], hz[nt:, :nt], hz[nt:, nt:], kt, st)
+                blocks = _frozen(Blocks, J_theta=jac[:, :nt], J_q=jac[:, nt:], H_tt=hz[:nt, :nt], H_tq=hz[:nt, nt:],
+                                 H_qt=hz[nt:, :nt], H_qq=hz[nt:, nt:], K_theta=kt, state=st)
                 remember_blocks(self.vm, kin, x, f6, blocks)
                 return x, f, it, st
             self._fast_its = it
@@ -947,7 +996,8 @@ class EquilibriumSolver:
     # ----------------------------------------------------------------- public
     def _result(self, x, f, iters, ok, state, p_t, r_t, path, with_stability=True) -> EquilibriumResult:
         vm = self.vm
-        w6 = full_wrench(vm, f)
+        w6 = np.zeros(6)
+        w6[self._task_rows] = f  # full_wrench(vm, f)
         fc = self._fast_cache
         if fc is not None and fc[0] == x.tobytes() + w6.tobytes() + p_t.tobytes() + r_t.tobytes():  # by _fast_newton
             res, stab = dict(fc[1]), fc[2]
@@ -967,14 +1017,15 @@ class EquilibriumSolver:
         """The :class:`EquilibriumResult` at configuration ``x`` (kinematic ``state``) under the
         total end wrench ``w6``, shared by the all-held and the mixed-control solves."""
         vm = self.vm
-        return EquilibriumResult(
+        pos, rot = state.position, state.rotation
+        return _new_result(
             x=x.copy(),
-            q=x[vm.q_idx].copy(),
-            theta=x[vm.theta_idx].copy(),
+            q=x[vm.q_idx],  # (index arrays: already copies)
+            theta=x[vm.theta_idx],
             wrench=w6,
-            deflection=deflection(self.p0, self.r0, state.position, state.rotation),
-            position=state.position.copy(),
-            rotation=state.rotation.copy(),
+            deflection=np.concatenate([pos - self.p0, pin.log3(rot @ self.r0.T)]),  # kinematics.chain.deflection
+            position=pos.copy(),
+            rotation=rot.copy(),
             converged=bool(ok),
             iterations=int(iters),
             residuals=res,
@@ -984,6 +1035,7 @@ class EquilibriumSolver:
             held=held,
             stability_end_held=end,
             warnings=warnings,
+            checks={},
         )
 
     def _solve_local(self, deflection, x0: np.ndarray) -> EquilibriumResult | None:
@@ -1025,20 +1077,25 @@ class EquilibriumSolver:
             w = w[self.task]
         elif w.size != m:
             raise InputError(f"wrench0 must have 6 or {m} (task) components (N, N·m), got {w.size}")
-        if not np.all(np.isfinite(w)):
+        if not np.isfinite(w).all():
             raise InputError("wrench0 contains NaN or infinite values")
         return w.copy()
 
     def _start(self, x0) -> np.ndarray:
         vm = self.vm
         x = vm.reference.copy() if x0 is None else np.asarray(x0, float).ravel().copy()
-        if x.shape != (vm.model.nq,) or not np.all(np.isfinite(x)):
+        if x.shape != (vm.model.nq,) or not np.isfinite(x).all():
             raise InputError(f"x0 must be a finite configuration of size {vm.model.nq}")
         return x
 
     def _vector6(self, v, name: str, unit: str) -> np.ndarray:
         """(6,) from 6 numbers, 3 numbers (x y z: the rest zero) or ``len(task)`` numbers (the
         task rows, in task order); :class:`InputError` on a wrong size or a NaN/inf."""
+        if type(v) is np.ndarray and v.shape == (6,) and v.dtype == np.float64:
+            # the common case (a curve's solves), as task_vector reads it: a copy, finite
+            a = v.copy()
+            if np.isfinite(a).all():
+                return a
         return task_vector(v, self.task, name, unit, task_sized=True, outside_task="keep")
 
     def components(self, spec) -> tuple[int, ...]:
@@ -1086,7 +1143,10 @@ class EquilibriumSolver:
         (:class:`NoEquilibrium`, or ``converged=False`` without ``raise_on_failure``), never a
         result with a warning only."""
         hrot = self._partial_rotation(held)
-        p, r = displace(self.p0, self.r0, d)
+        if d[3:].tobytes() == _ZERO3:  # displace(p0, r0, d) without exp3 (the same numbers)
+            p, r = self.p0 + d[:3], self._r_unrotated.copy()
+        else:
+            p, r = displace(self.p0, self.r0, d)
         res = run(p, r, x0, f0)
         if not hrot:
             return res
@@ -1166,13 +1226,15 @@ class EquilibriumSolver:
         f_start = self._task_wrench(wrench0)
 
         def run(p, r, x, f):
-            return self._solve_target(p, r, x, self._task_wrench(f), raise_on_failure, fast_fail)
+            # f_start is task rows already (a later target correction passes a result's (6,) wrench)
+            return self._solve_target(p, r, x, f if f is f_start else self._task_wrench(f), raise_on_failure, fast_fail)
 
         if target is not None or deflection is None:
             p_t, r_t = _as_target(self.vm, self.kin, self.p0, self.r0, deflection, target)
             return run(p_t, r_t, x_start, f_start)
         d = self._vector6(deflection, "deflection", "m, rad")
-        task_vector(d, self.vm.task, "deflection", "m, rad")  # components outside the task (as _as_target)
+        if self._off_task.size and np.any(d[self._off_task]):
+            task_vector(d, self.vm.task, "deflection", "m, rad")  # its error: components outside the task (as _as_target)
         return self._rotation_targets(d, self.task, run, x_start, f_start, raise_on_failure)
 
     def _escape(self, res, p_t, r_t, attempt_once) -> list[EquilibriumResult]:
@@ -1239,7 +1301,7 @@ class EquilibriumSolver:
 
         # A start where the end cannot move in some constrained direction (e.g. a straight
         # chain of rigid links) gives a singular eq. (28)/(10) matrix: perturb it first (§4.1).
-        jz0 = self.kin.evaluate(x_start, hessian=False).jacobian[self.task][:, self.free]
+        jz0 = self.kin.evaluate(x_start, hessian=False).jacobian[self._task_rows].take(self.free, axis=1)
         sv = _singular_values(jz0)
         if sv.size < len(self.task) or sv.min() <= 1e-9 * max(sv.max(), 1e-300):
             x_start = self._perturb(x_start, rng)

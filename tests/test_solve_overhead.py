@@ -1,0 +1,109 @@
+"""The per-solve shortcuts of EquilibriumSolver (issue 14) give what the general code gives.
+
+Each shortcut of the hot path (input checks, target pose, result construction, BLAS thread
+accessors) is compared with the general code it replaces, and every bad input it could let
+through is still refused.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from threadpoolctl import threadpool_info
+
+from vjm_pin.exceptions import InputError
+from vjm_pin.kinematics.chain import displace
+from vjm_pin.model.registry import resolve_model
+from vjm_pin.model.task import task_vector
+from vjm_pin.solver import equilibrium as eq
+from vjm_pin.solver import threads
+
+
+@pytest.fixture(scope="module")
+def solver():
+    return eq.EquilibriumSolver(resolve_model("paper-c-s"))
+
+
+def test_unrotated_target_is_displace_bit_for_bit(solver):
+    d = np.array([-2e-4, 1e-5, 3e-6, 0.0, 0.0, 0.0])
+    p, r = displace(solver.p0, solver.r0, d)
+    assert solver._r_unrotated.tobytes() == r.tobytes()
+    assert (solver.p0 + d[:3]).tobytes() == p.tobytes()
+
+
+def test_fast_result_construction_equals_the_dataclass(solver):
+    r = solver.solve(np.array([-1e-4, 0, 0]))
+    fields = {f.name: getattr(r, f.name) for f in dataclasses.fields(r)}
+    plain = eq.EquilibriumResult(**fields)
+    fast = eq._new_result(**fields)
+    assert type(fast) is eq.EquilibriumResult
+    assert all(getattr(fast, k) is getattr(plain, k) for k in fields)
+    assert dataclasses.replace(fast, path="x").path == "x" and fast.path == r.path
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        fast.path = "y"
+    # the result's arrays are its own: q and theta are copies, not views of x
+    assert not np.shares_memory(r.q, r.x) and not np.shares_memory(r.theta, r.x)
+
+
+def test_vector6_shortcut_reads_as_task_vector(solver):
+    v = np.array([-1e-4, 2e-5, 0.0, 0.0, 0.0, 0.0])
+    got = solver._vector6(v, "deflection", "m, rad")
+    ref = task_vector(v, solver.task, "deflection", "m, rad", task_sized=True, outside_task="keep")
+    assert got.tobytes() == ref.tobytes() and not np.shares_memory(got, v)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_non_finite_inputs_still_refused(solver, bad):
+    x0 = solver.vm.reference.copy()
+    x0[3] = bad
+    with pytest.raises(InputError, match="x0 must be a finite"):
+        solver.solve(np.array([-1e-4, 0, 0]), x0=x0)
+    with pytest.raises(InputError, match="wrench0 contains NaN"):
+        solver.solve(np.array([-1e-4, 0, 0]), wrench0=np.array([bad, 0.0, 0.0]))
+    with pytest.raises(InputError, match="deflection contains NaN"):
+        solver.solve(np.array([-1e-4, 0, 0, 0, bad, 0]))
+
+
+def test_huge_finite_start_is_accepted(solver):
+    x0 = np.full(solver.vm.model.nq, 1e308)  # finite (its sum is not)
+    assert solver._start(x0).tobytes() == x0.tobytes()
+    assert solver._task_wrench(np.full(6, 1e308)).tobytes() == np.full(3, 1e308).tobytes()
+
+
+def test_deflection_outside_the_task_still_refused(solver):
+    with pytest.raises(InputError, match="outside the task"):
+        solver.solve(np.array([-1e-4, 0, 0, 0, 1e-3, 0]))
+
+
+def test_blas_accessors_read_what_threadpoolctl_reads():
+    ctl = threads._blas_controller()
+    if ctl is None:
+        pytest.skip("threadpoolctl cannot inspect the BLAS libraries here")
+    got = [get() for get, _ in threads._accessors(ctl)]
+    assert got == [lib.get_num_threads() for lib in ctl.lib_controllers]
+    with threads.single_blas_thread():
+        inside = [d["num_threads"] for d in threadpool_info() if d["user_api"] == "blas"]
+    assert inside and all(n == 1 for n in inside)
+    after = sorted(d["num_threads"] for d in threadpool_info() if d["user_api"] == "blas")
+    assert after == sorted(got)  # restored
+
+
+def test_frozen_shortcut_equals_the_constructor_and_keeps_its_errors():
+    from vjm_pin.solver.blocks import Blocks
+    from vjm_pin.solver.stability import StabilityResult
+
+    ev = np.array([-3.0, -1.0])
+    a = eq._frozen(StabilityResult, stable=True, eigenvalues=ev, null_dim=2, tolerance=1e-9)
+    b = StabilityResult(True, ev, 2, 1e-9)
+    assert type(a) is StabilityResult and vars(a) == vars(b)
+    z = np.zeros((1, 1))
+    blk = eq._frozen(Blocks, J_theta=z, J_q=z, H_tt=z, H_tq=z, H_qt=z, H_qq=z, K_theta=z, state=None)
+    assert blk.chain is None  # the default of the field not given
+    with pytest.raises(TypeError):
+        eq._frozen(StabilityResult, stable=True, eigenvalues=ev, null_dim=2, tolerance=1e-9, extra=1)
+    with pytest.raises(TypeError):
+        eq._frozen(StabilityResult, stable=True, eigenvalues=ev, null_dim=2, bogus=1)
+    with pytest.raises(TypeError):
+        eq._frozen(StabilityResult, stable=True)
