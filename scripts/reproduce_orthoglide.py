@@ -17,16 +17,22 @@ Usage::
 
     python scripts/reproduce_orthoglide.py                # tables on stdout, Fig. 7 PNG
     python scripts/reproduce_orthoglide.py --write-doc    # also update docs/orthoglide.md
+    python scripts/reproduce_orthoglide.py --jobs 1       # in this process, one curve after the other
 
-One command regenerates everything (a few minutes on one core).
+One command regenerates everything: 15 models × (unloaded stiffness + 3 curves), run as 60
+independent tasks on a process pool (``--jobs``, default the number of cores; one BLAS thread
+per worker), longest first, with a progress line per finished task on stderr. The numbers do not
+depend on ``--jobs`` (every task builds its own solver).
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib.util
+import os
 import re
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -74,6 +80,20 @@ def unloaded(ms: MechanismSolver) -> tuple[float, float]:
 LOADINGS = (("free", "-u"), ("held", "-u"), ("free", "+u"))
 
 
+def curve_row(vm, ms, loading: str, name: str, max_deflection: float, steps: int) -> dict:
+    """One curve along ±u (``loading``: "free" or "held") and its summary."""
+    sign = -1.0 if name == "-u" else 1.0
+    c = trace_curve(vm, sign * U, max_deflection, steps, solver=ms, free=loading == "free")
+    row = {"curve": c, "crit": c.critical[0] if c.critical else None}
+    row["k_large"] = c.points[-1].stiffness
+    row["f_max"] = c.points[-1].force
+    row["s_end"] = c.points[-1].deflection
+    row["stopped"] = ""  # trace_curve raises NoEquilibrium instead of stopping short
+    if row["crit"] is not None:  # lowest stiffness past the critical point
+        row["k_min_after"] = min(p.stiffness for p in c.points[row["crit"].index :])
+    return row
+
+
 def analyse(source, max_deflection: float, steps: int, loadings=LOADINGS) -> dict:
     """Curves along the bisector and their summary for one model (URDF path or text)."""
     vm = load_vjm(source)
@@ -81,17 +101,84 @@ def analyse(source, max_deflection: float, steps: int, loadings=LOADINGS) -> dic
     k_free, k_held = unloaded(ms)
     out = {"k_free": k_free, "k_held": k_held, "curves": {}}
     for loading, name in loadings:
-        sign = -1.0 if name == "-u" else 1.0
-        c = trace_curve(vm, sign * U, max_deflection, steps, solver=ms, free=loading == "free")
-        row = {"curve": c, "crit": c.critical[0] if c.critical else None}
-        row["k_large"] = c.points[-1].stiffness
-        row["f_max"] = c.points[-1].force
-        row["s_end"] = c.points[-1].deflection
-        row["stopped"] = ""  # trace_curve raises NoEquilibrium instead of stopping short
-        if row["crit"] is not None:  # lowest stiffness past the critical point
-            row["k_min_after"] = min(p.stiffness for p in c.points[row["crit"].index :])
-        out["curves"][(loading, name)] = row
+        out["curves"][(loading, name)] = curve_row(vm, ms, loading, name, max_deflection, steps)
     return out
+
+
+def _task(source, what, max_deflection: float, steps: int):
+    """One task of the pool: ``what`` = "unloaded" → (k_free, k_held), or a (loading, name) of
+    :data:`LOADINGS` → its curve row. Returns (result, CPU seconds)."""
+    t0 = time.process_time()
+    vm = load_vjm(source)
+    ms = MechanismSolver(vm)
+    out = unloaded(ms) if what == "unloaded" else curve_row(vm, ms, *what, max_deflection, steps)
+    return out, time.process_time() - t0
+
+
+#: Relative cost of the tasks (CPU seconds measured on one core), to start the longest first.
+_COST = {"2bar": 4.0, "coupled": 1.5, "folded": 1.0}
+
+
+def compute(variants: dict, max_deflection: float, steps: int, jobs: int, log=sys.stderr) -> dict:
+    """Every model of ``variants`` (name → file prefix) at :data:`POINTS`: ``res[variant][point]``
+    as :func:`analyse` returns, on ``jobs`` worker processes (1: in this process). One progress
+    line per finished task on ``log``."""
+    tasks = []
+    for variant, prefix in variants.items():
+        for q in POINTS:
+            src = ROOT / "models" / "urdf" / f"{prefix}-{q}.urdf"
+            for what in ("unloaded", *LOADINGS):
+                weight = _COST.get(variant, 1.0) * (0.2 if what == "unloaded" else 3.0 if what == ("free", "-u") else 1.0)
+                tasks.append((weight, variant, q, what, src))
+    tasks.sort(key=lambda t: -t[0])
+    res = {v: {q: {"curves": {}} for q in POINTS} for v in variants}
+    t0 = time.perf_counter()
+    cpu = 0.0
+
+    def store(task, value, seconds, done):
+        nonlocal cpu
+        _, variant, q, what, _ = task
+        cpu += seconds
+        if what == "unloaded":
+            res[variant][q]["k_free"], res[variant][q]["k_held"] = value
+        else:
+            res[variant][q]["curves"][what] = value
+        label = what if what == "unloaded" else " ".join(what)
+        print(
+            f"[{done}/{len(tasks)}] {variant} {q} {label}: {seconds:.1f} s CPU "
+            f"({time.perf_counter() - t0:.0f} s elapsed)",
+            file=log,
+            flush=True,
+        )
+
+    if jobs <= 1:
+        for i, task in enumerate(tasks, 1):
+            value, seconds = _task(task[4], task[3], max_deflection, steps)
+            store(task, value, seconds, i)
+    else:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        # one BLAS thread per worker (spawned workers read these at import)
+        for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+            os.environ.setdefault(var, "1")
+        ctx = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
+            futures = {pool.submit(_task, t[4], t[3], max_deflection, steps): t for t in tasks}
+            for i, fut in enumerate(as_completed(futures), 1):
+                value, seconds = fut.result()
+                store(futures[fut], value, seconds, i)
+    for variant in res:  # the curves in LOADINGS order (the tables' row order)
+        for q in POINTS:
+            curves = res[variant][q]["curves"]
+            res[variant][q]["curves"] = {key: curves[key] for key in LOADINGS}
+    print(
+        f"{len(tasks)} tasks in {time.perf_counter() - t0:.1f} s wall, {cpu:.1f} s CPU in the tasks, "
+        f"{max(jobs, 1)} worker(s)",
+        file=log,
+        flush=True,
+    )
+    return res
 
 
 def _kn(x):
@@ -230,6 +317,12 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--max-deflection", type=float, default=6.0, help="range (mm)")
     parser.add_argument("--steps", type=int, default=24)
+    parser.add_argument(
+        "--jobs",
+        type=int,
+        default=os.cpu_count() or 1,
+        help="worker processes (default: the number of cores; 1: run in this process)",
+    )
     parser.add_argument("--figure", default=str(ROOT / "docs" / "figures" / "orthoglide_fig7.png"))
     parser.add_argument(
         "--write-doc",
@@ -238,14 +331,10 @@ def main(argv=None) -> int:
     )
     args = parser.parse_args(argv)
     smax = args.max_deflection * 1e-3
+    if args.jobs < 1:
+        parser.error(f"--jobs must be at least 1, got {args.jobs}")
     mo = generator()
-    res = {v: {} for v in mo.VARIANTS}
-    for variant, prefix in mo.VARIANTS.items():
-        for q in POINTS:
-            print(f"{variant} {q} ...", file=sys.stderr, flush=True)
-            res[variant][q] = analyse(
-                ROOT / "models" / "urdf" / f"{prefix}-{q}.urdf", smax, args.steps
-            )
+    res = compute(mo.VARIANTS, smax, args.steps, args.jobs)
     figure(res, Path(args.figure))
     k_a = mo.calibrated_actuator()
     d = mo.bar_outer_diameter()

@@ -38,6 +38,7 @@ from vjm_pin.kinematics.chain import displace, flush_tiny
 from vjm_pin.solver.mechanism import (
     DESCENT_ITER_FACTOR,
     LOCAL_MAX_ITER,
+    STALL_WINDOW,
     MechanismSolver,
     _null_basis,
     _verdict,
@@ -255,10 +256,12 @@ class MechanismTracer(_Tracer):
             return self.solve(s, x0)
         p_t, r_t = self.target(s)
         x, it, ok, st = self.run._newton(
-            np.asarray(x0, float), self.hrows, self.wdead, p_t, r_t, 1.0, DESCENT_ITER_FACTOR * self.run.max_iter
+            np.asarray(x0, float), self.hrows, self.wdead, p_t, r_t, 1.0, DESCENT_ITER_FACTOR * self.run.max_iter,
+            stall=STALL_WINDOW,
         )
         # no fall-back to the full solver here: a failed descent from one perturbed start is one
-        # candidate less (switch tries the others, then the full solver once)
+        # candidate less (switch tries the others, then the full solver once); a descent that
+        # stalls on a flat saddle (next to a multiple bifurcation) gives up early (STALL_WINDOW)
         return self.run._result(x, it, ok, self.hrows, self.wdead, p_t, r_t, "descent",
                                 state=st if ok else None, verdicts=False)
 

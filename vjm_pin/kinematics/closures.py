@@ -55,6 +55,7 @@ import pinocchio as pin
 from vjm_pin.exceptions import ArgumentError, InputError
 from vjm_pin.kinematics.chain import KinematicState, contract_hessian
 from vjm_pin.kinematics.frames import FrameKinematics
+from vjm_pin.kinematics.screw import psi_hessian_screw, screw_applicable, support_mask
 from vjm_pin.model.format import COMPONENTS, Closure, VjmModel, relative_placement
 
 #: Default relative tolerance of :func:`constraint_rank` and :func:`min_norm_multipliers`.
@@ -119,6 +120,10 @@ class ClosureFrames:
         placement: (6,) full relative placement ``s`` (m, rad; frame b's axes).
         jacobian: (6, nv) ``∂s/∂x`` (all six components).
         jlog: (3, 3) ``Jlog3(R_bᵀ R_a)``.
+        screw: The eq. (16) contractions of :meth:`hessian` come from the frame Jacobians in
+            screw form (:func:`~vjm_pin.kinematics.screw.psi_hessian_screw`; chains of 1-DoF
+            revolute/prismatic joints) instead of Pinocchio's kinematic Hessians (then ``a`` and
+            ``b`` carry none).
     """
 
     closure: Closure
@@ -127,6 +132,7 @@ class ClosureFrames:
     placement: np.ndarray
     jacobian: np.ndarray
     jlog: np.ndarray
+    screw: bool = False
 
     def wrenches(self, lam6: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The reaction wrench pair (W_a, W_b), each (6,) (N, N·m, world axes, at the frame
@@ -135,47 +141,75 @@ class ClosureFrames:
         f = self.b.rotation @ lam6[:3]
         m = self.a.rotation @ self.jlog.T @ lam6[3:]
         r = self.a.position - self.b.position
-        return np.concatenate([f, m]), np.concatenate([-f, np.cross(f, r) - m])
+        fxr = np.array([f[1] * r[2] - f[2] * r[1], f[2] * r[0] - f[0] * r[2], f[0] * r[1] - f[1] * r[0]])
+        return np.concatenate([f, m]), np.concatenate([-f, fxr - m])
 
     def hessian(self, lam6: np.ndarray) -> np.ndarray:
         """(nv, nv) ``∂((∂s/∂x)ᵀ λ6)/∂x`` (symmetric): eq. (16) contractions plus the terms of
         the turning reaction (module docstring)."""
         a, b = self.a, self.b
-        if a.hessian is None or b.hessian is None:
+        if not self.screw and (a.hessian is None or b.hessian is None):
             raise InputError(
                 "this closure state was evaluated without Hessians: evaluate(x, hessian=True)"
             )
+        if self.screw:
+            cols, block = self.hessian_block(lam6)
+            nv = a.jacobian.shape[1]
+            out = np.zeros((nv, nv))
+            out[np.ix_(cols, cols)] = block
+            return out
         lam6 = np.asarray(lam6, float)
         w_a, w_b = self.wrenches(lam6)
+        return self._terms(lam6, w_a, a.jacobian, b.jacobian, self.jacobian[3:]) + (
+            contract_hessian(a.hessian, w_a) + contract_hessian(b.hessian, w_b)
+        )
+
+    def _terms(self, lam6, w_a, ja, jb, jr):
+        """The terms of the turning reaction (module docstring; ``w_a`` the reaction wrench on
+        frame a) on the columns of ``ja``, ``jb`` (the frames' Jacobians) and ``jr`` (``∂s_r/∂x``)."""
+        a, b = self.a, self.b
         f, m = w_a[:3], w_a[3:]
         r = a.position - b.position
-        jv = a.jacobian[:3] - b.jacobian[:3]
-        jw = a.jacobian[3:] - b.jacobian[3:]
-        jwb = b.jacobian[3:]
+        jv = ja[:3] - jb[:3]
+        jw = ja[3:] - jb[3:]
+        jwb = jb[3:]
         sf = skew(f)
         d_f = -sf @ jwb
         d_fr = sf @ jv + skew(r) @ sf @ jwb
-        d_m = (
-            -skew(m) @ jwb
-            + b.rotation @ jlog3_derivative(self.placement[3:], lam6[3:]) @ self.jacobian[3:]
+        d_m = -skew(m) @ jwb + b.rotation @ jlog3_derivative(self.placement[3:], lam6[3:]) @ jr
+        return jv.T @ d_f + jw.T @ d_m + jwb.T @ d_fr
+
+    def hessian_block(self, lam6: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(cols, block): :meth:`hessian` on the joints that move frame a or frame b (the nonzero
+        columns of their Jacobians, ascending; the matrix is zero elsewhere), in screw form
+        (``screw=True`` states only)."""
+        if not self.screw:
+            raise InputError("hessian_block needs a closure state evaluated in screw form")
+        a, b = self.a, self.b
+        lam6 = np.asarray(lam6, float)
+        cols = np.flatnonzero(np.any(a.jacobian != 0, axis=0) | np.any(b.jacobian != 0, axis=0))
+        ja, jb = a.jacobian[:, cols], b.jacobian[:, cols]
+        w_a, w_b = self.wrenches(lam6)
+        mask = support_mask(a.jacobian.shape[1], cols)
+        block = (
+            psi_hessian_screw(ja, w_a, mask)
+            + psi_hessian_screw(jb, w_b, mask)
+            + self._terms(lam6, w_a, ja, jb, self.jacobian[3:, cols])
         )
-        return (
-            contract_hessian(a.hessian, w_a)
-            + contract_hessian(b.hessian, w_b)
-            + jv.T @ d_f
-            + jw.T @ d_m
-            + jwb.T @ d_fr
-        )
+        return cols, block
 
 
-def closure_frames(closure: Closure, a: KinematicState, b: KinematicState) -> ClosureFrames:
-    """Evaluate one closure from the states of its two frames (module docstring formulas)."""
+def closure_frames(
+    closure: Closure, a: KinematicState, b: KinematicState, screw: bool = False
+) -> ClosureFrames:
+    """Evaluate one closure from the states of its two frames (module docstring formulas);
+    ``screw``: its Hessian from the Jacobians in screw form (:class:`ClosureFrames`)."""
     r = a.position - b.position
     s = relative_placement(a.position, a.rotation, b.position, b.rotation)
     jlog = jlog3(s[3:])
     jp = b.rotation.T @ (a.jacobian[:3] - b.jacobian[:3] + skew(r) @ b.jacobian[3:])
     jr = jlog @ a.rotation.T @ (a.jacobian[3:] - b.jacobian[3:])
-    return ClosureFrames(closure, a, b, s, np.vstack([jp, jr]), jlog)
+    return ClosureFrames(closure, a, b, s, np.vstack([jp, jr]), jlog, screw)
 
 
 @dataclass(frozen=True)
@@ -221,7 +255,11 @@ class ClosureState:
         out = np.zeros((nv, nv))
         for cf, lam6 in zip(self.frames, self._split(lam)):
             if np.any(lam6):
-                out += cf.hessian(lam6)
+                if cf.screw:  # on the joints that move the closure's frames only
+                    cols, block = cf.hessian_block(lam6)
+                    out[np.ix_(cols, cols)] += block
+                else:
+                    out += cf.hessian(lam6)
         return out
 
     def reaction_wrenches(self, lam) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -242,10 +280,18 @@ class ClosureSet:
         closures: Override or supply the closures (default: ``vm.closures``).
         frames: A :class:`~vjm_pin.kinematics.frames.FrameKinematics` to share with other users (it
             must include :attr:`frame_ids`); a private one by default.
+        screw: Evaluate the multiplier Hessian from the frame Jacobians in screw form
+            (:func:`~vjm_pin.kinematics.screw.psi_hessian_screw`: no 6 × nv × nv kinematic
+            Hessians, the same matrix to round-off) when every joint is a 1-DoF revolute or
+            prismatic joint (:func:`~vjm_pin.kinematics.screw.screw_applicable`); ignored otherwise.
     """
 
     def __init__(
-        self, vm, closures: Sequence[Closure] | None = None, frames: FrameKinematics | None = None
+        self,
+        vm,
+        closures: Sequence[Closure] | None = None,
+        frames: FrameKinematics | None = None,
+        screw: bool = False,
     ):
         model = vm.model if isinstance(vm, VjmModel) else vm
         if not isinstance(model, pin.Model):
@@ -277,6 +323,9 @@ class ClosureSet:
         self.labels: tuple[str, ...] = tuple(
             f"{c.name}.{comp}" for c in self.closures for comp in c.components
         )
+        if screw:
+            screw = screw_applicable(model)
+        self.screw = bool(screw)
 
     @property
     def n_rows(self) -> int:
@@ -285,10 +334,11 @@ class ClosureSet:
 
     def evaluate(self, x: np.ndarray, hessian: bool = True) -> ClosureState:
         """Residual, Jacobian and (with ``hessian``) what :meth:`ClosureState.hessian` needs, at ``x``."""
-        states = self.frames.evaluate(x, hessian=hessian)
+        screw = hessian and self.screw
+        states = self.frames.evaluate(x, hessian=hessian and not screw)
         frames, res, jac = [], [], []
         for c, (fa, fb) in zip(self.closures, self.pairs):
-            cf = closure_frames(c, states[fa], states[fb])
+            cf = closure_frames(c, states[fa], states[fb], screw)
             idx = list(c.indices)
             frames.append(cf)
             res.append(cf.placement[idx])

@@ -71,6 +71,7 @@ from vjm_pin.kinematics.chain import contract_hessian, deflection, displace, pos
 from vjm_pin.kinematics.closures import RANK_RTOL, ClosureSet, constraint_rank
 from vjm_pin.kinematics.dead_loads import DeadLoads, Load
 from vjm_pin.kinematics.frames import FrameKinematics
+from vjm_pin.kinematics.screw import psi_hessian_screw, screw_applicable, support_mask
 from vjm_pin.kinematics.shared import data_for
 from vjm_pin.model.format import VjmModel
 from vjm_pin.solver.stability import STABILITY_TOL, StabilityResult, spectral_norm
@@ -88,6 +89,12 @@ POLISH_STEP = 1e-12
 #: Iterations of the plain local attempt; the descent budget in units of ``max_iter``.
 LOCAL_MAX_ITER = 12
 DESCENT_ITER_FACTOR = 8
+#: A descent with a stall window (``_newton(stall=...)``, the branch switch's candidates) gives up
+#: when, over that many iterations, the accepted steps lowered the merit by less than
+#: :data:`STALL_REL` × (|merit| + spring energy) in total and the KKT residual did not halve: it
+#: creeps along a flat saddle and would exhaust its budget without converging.
+STALL_WINDOW = 40
+STALL_REL = 1e-9
 #: Largest step (rad, or ×L_c for prismatic coordinates) of one Newton iteration.
 MAX_STEP = 0.3
 #: A dead-loaded solve whose descent moves a coordinate further than this (rad, or × the length
@@ -303,12 +310,16 @@ class MechanismSolver:
         probe_l = DeadLoads(vm, loads, None)
         ids = [vm.frame_id, *probe_c.frame_ids, *probe_l.frame_ids]
         self.frames = FrameKinematics(model, ids)
-        self.closures = ClosureSet(vm, frames=self.frames)
+        # eq. (16) contractions in screw form from the Jacobians (no 6 × nv × nv kinematic
+        # Hessians; the same matrices to round-off) for chains of 1-DoF joints without link weights
+        self._screw = screw_applicable(model) and gravity is None
+        self.closures = ClosureSet(vm, frames=self.frames, screw=self._screw)
         self.loads = DeadLoads(vm, loads, gravity, frames=self.frames)
         self._gravity_only = DeadLoads(vm, (), gravity) if self.loads.gravity is not None else None
         self.task = list(vm.task)
         self.free = np.concatenate([vm.theta_idx, vm.q_idx]).astype(int)
         self.nt = vm.n_theta
+        self._mask_free = support_mask(model.nv, self.free) if self._screw else None
         n = len(self.free)
         ref = self.frames.evaluate(vm.reference, hessian=False)
         end0 = ref[vm.frame_id]
@@ -530,10 +541,11 @@ class MechanismSolver:
     def _state(self, x, hrows, w_dead, p_t, r_t, factor, hessian) -> _State:
         vm, free = self.vm, self.free
         th, tl = self._split_axes(hrows)
-        states = self.frames.evaluate(x, hessian=hessian)
+        screw = hessian and self._screw
+        states = self.frames.evaluate(x, hessian=hessian and not screw)
         end = states[vm.frame_id]
         cst = self.closures.evaluate(x, hessian=hessian)
-        lst = self.loads.evaluate(x, hessian=hessian)
+        lst = self.loads.evaluate(x, hessian=hessian and not screw)
         n = len(free)
         tau = np.zeros(n)
         tau[: self.nt] = vm.K_theta @ (x[vm.theta_idx] - vm.theta0)
@@ -570,7 +582,12 @@ class MechanismSolver:
                 nu = vt[:ki].T @ ((u[:, :ki].T @ g) / s[:ki])
         w6 = wl + th.T @ nu[cst.residual.size :]
         dload = None
-        if hessian:
+        if screw:  # the dead loads' eq. (16) contractions (no link weights on this path)
+            dload = np.zeros((n, n))
+            for ld, fid in zip(self.loads.loads, self.loads.load_frame_ids):
+                dload += psi_hessian_screw(states[fid].jacobian[:, free], ld.wrench, self._mask_free)
+            dload *= factor
+        elif hessian:
             dload = factor * lst.derivative[np.ix_(free, free)]
         return _State(end, cst, grad, tau, qload, a, b, bscale, indep, redundant, y, z, rr, nu, nu_i, r, w6, dload)
 
@@ -578,15 +595,22 @@ class MechanismSolver:
         """``W = K − ∂Q/∂z − H(w) − Σ μ_k ∂²c_k/∂z²`` (free block)."""
         free = self.free
         nc = s.cstate.residual.size
-        hend = contract_hessian(s.end.hessian, s.w6)[np.ix_(free, free)]
+        if s.end.hessian is None:  # screw form (self._screw), on the joints that move the task frame
+            jf = s.end.jacobian[:, free]
+            nz = np.flatnonzero(np.any(jf != 0, axis=0))
+            hend = np.zeros((len(free), len(free)))
+            hend[np.ix_(nz, nz)] = psi_hessian_screw(jf[:, nz], s.w6, support_mask(self.vm.model.nv, free[nz]))
+        else:
+            hend = contract_hessian(s.end.hessian, s.w6)[np.ix_(free, free)]
         w = self.kz - s.dload - hend
         if nc:
             w = w - s.cstate.hessian(s.nu[:nc])[np.ix_(free, free)]
         return w
 
     # ----------------------------------------------------------------- Newton
-    def _newton(self, x, hrows, w_dead, p_t, r_t, factor, max_iter, local=False):
-        """Returns (x, iterations, converged, state)."""
+    def _newton(self, x, hrows, w_dead, p_t, r_t, factor, max_iter, local=False, stall=0):
+        """Returns (x, iterations, converged, state). ``stall``: give up (not converged) when the
+        last ``stall`` descent steps made no progress (:data:`STALL_WINDOW`); 0: never."""
         tol, lc = self.tol, self.length_scale
         kscale = max(self.kscale, 1e-300)
         shift = SHIFT_TOL * kscale
@@ -595,6 +619,8 @@ class MechanismSolver:
         polish = escapes = 0
         kkt_prev = np.inf
         s = rho_prev = None
+        drops: list[float] = []  # merit decrease of each accepted descent step (stall test)
+        kkts: list[float] = []
         for it in range(max_iter + 1 + POLISH_ITERATIONS):
             s = self._state(x, hrows, w_dead, p_t, r_t, factor, True)
             if not (np.all(np.isfinite(s.nu)) and np.all(np.isfinite(s.r))):
@@ -642,6 +668,8 @@ class MechanismSolver:
                 x = x.copy()
                 x[self.free] += v * (MAX_STEP / max(np.abs(v / self.var_scale).max(), 1e-300))
                 kkt_prev = np.inf
+                drops.clear()
+                kkts.clear()
                 continue
             if conv:
                 if modified or polish >= POLISH_ITERATIONS or smax <= POLISH_STEP:
@@ -680,24 +708,34 @@ class MechanismSolver:
             slope = min(float(s.grad @ dx) - float(rho @ ab), 0.0)
             noise = 1e-13 * (abs(phi0) + self.energy(x) + 1e-300)
             alpha, accepted = 1.0, False
+            phi_n = phi0
             for _ in range(40):
                 xn = x.copy()
                 xn[self.free] += alpha * dx
                 end_n, bn = self._trial(xn, hrows, p_t, r_t)
                 if np.all(np.isfinite(bn)):
-                    if not self.follow_stable or self._potential(xn, end_n, lrows, w_dead, factor) + float(
-                        rho @ np.abs(bn)
-                    ) <= (phi0 + 1e-4 * alpha * slope + noise):
+                    if not self.follow_stable:
                         accepted = True
-                    elif alpha == 1.0 and not modified:
-                        sn = self._state(xn, hrows, w_dead, p_t, r_t, factor, False)
-                        kn = float(np.linalg.norm(sn.b / sn.bscale) + np.linalg.norm(sn.r) / kscale)
-                        accepted = kn < 0.5 * kkt0
+                    else:
+                        phi_n = self._potential(xn, end_n, lrows, w_dead, factor) + float(rho @ np.abs(bn))
+                        if phi_n <= (phi0 + 1e-4 * alpha * slope + noise):
+                            accepted = True
+                        elif alpha == 1.0 and not modified:
+                            sn = self._state(xn, hrows, w_dead, p_t, r_t, factor, False)
+                            kn = float(np.linalg.norm(sn.b / sn.bscale) + np.linalg.norm(sn.r) / kscale)
+                            accepted = kn < 0.5 * kkt0
                 if accepted:
                     break
                 alpha *= 0.5
             if not accepted:
                 return x, it + 1, False, s
+            if stall:
+                drops.append(phi0 - phi_n)
+                kkts.append(kkt0)
+                if len(kkts) > stall:
+                    recent = sum(drops[-stall:])
+                    if recent <= STALL_REL * (abs(phi0) + self.energy(x)) and min(kkts[-stall:]) > 0.5 * min(kkts[:-stall]):
+                        return x, it + 1, False, s
             x = xn
         return x, max_iter, False, s
 
@@ -762,7 +800,7 @@ class MechanismSolver:
         if x.shape != (self.vm.model.nq,) or not np.all(np.isfinite(x)):
             raise InputError(f"x0 must be a finite configuration of size {self.vm.model.nq}")
         hrows = [self.task.index(c) for c in hcomp]
-        res = self._rotation_targets(d, hcomp, hrows, w, x)
+        res = self._rotation_targets(d, hcomp, hrows, w, x, stall=STALL_WINDOW)
         if not res.converged and raise_on_failure and "+path-" in res.path:
             kind, rest = res.path.split("+path-")[1].split("(", 1)
             span, far = rest.rstrip(")").split(";far=")
@@ -785,12 +823,13 @@ class MechanismSolver:
             )
         return res
 
-    def _rotation_targets(self, d, hcomp, hrows, w, x0) -> MechanismResult:
+    def _rotation_targets(self, d, hcomp, hrows, w, x0, stall: int = 0) -> MechanismResult:
         """Held rows of ``log3(R_t Rᵀ)`` with ``R_t = exp3(d̂) R0``; with some but not all
         rotations held, ``d̂`` is corrected until the reported ``log3(R R0ᵀ)`` meets ``d`` in the
-        held components (as :meth:`EquilibriumSolver._rotation_targets`)."""
+        held components (as :meth:`EquilibriumSolver._rotation_targets`); ``stall`` as
+        :meth:`_solve_target`."""
         p, r = displace(self.p0, self.r0, d)
-        res = self._solve_target(p, r, hrows, w, x0)
+        res = self._solve_target(p, r, hrows, w, x0, stall)
         hrot = [c for c in hcomp if c >= 3]
         if not (0 < len(hrot) < 3):
             return res
@@ -808,17 +847,21 @@ class MechanismSolver:
             dh[hrot] += err
             dh[other] = res.deflection[other]
             p, r = displace(self.p0, self.r0, dh)
-            res = self._solve_target(p, r, hrows, w, res.x)
+            res = self._solve_target(p, r, hrows, w, res.x, stall)
             total += res.iterations
         return replace(res, iterations=total)
 
-    def _solve_target(self, p_t, r_t, hrows, w_dead, x_start) -> MechanismResult:
+    def _solve_target(self, p_t, r_t, hrows, w_dead, x_start, stall: int = 0) -> MechanismResult:
+        """The equilibrium at the targets (local Newton, descent, continuation with restarts);
+        ``stall``: the descents and continuation steps give up when they stall (:data:`STALL_WINDOW`;
+        :meth:`solve`'s, so that an unreachable target fails sooner; the curve tracer keeps 0)."""
         total = 0
         label = "newton"
         x, it, ok, _ = self._newton(x_start, hrows, w_dead, p_t, r_t, 1.0, LOCAL_MAX_ITER, local=True)
         total += it
         if not ok:
-            x, it, ok, _ = self._newton(x_start, hrows, w_dead, p_t, r_t, 1.0, DESCENT_ITER_FACTOR * self.max_iter)
+            x, it, ok, _ = self._newton(x_start, hrows, w_dead, p_t, r_t, 1.0, DESCENT_ITER_FACTOR * self.max_iter,
+                                        stall=stall)
             total += it
             label += "+descent"
             if ok and self._dead_loaded(w_dead) and self._jump(x, x_start) > FAR_JUMP:
@@ -840,7 +883,7 @@ class MechanismSolver:
                         a = k / nsteps
                         pk = (1 - a) * ps.position + a * p_t
                         rk = pin.exp3(a * dlog) @ ps.rotation
-                        xc, itc, okc, _ = self._newton(xc, hrows, a * w_dead, pk, rk, a, self.max_iter)
+                        xc, itc, okc, _ = self._newton(xc, hrows, a * w_dead, pk, rk, a, self.max_iter, stall=stall)
                         total += itc
                         if not okc:
                             break
