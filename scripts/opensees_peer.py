@@ -32,8 +32,9 @@ This file is self-contained and does **not** import ``vjm_pin``.  OpenSeesPy is
 an optional benchmark dependency (``pip install openseespy``); without it
 :func:`load_opensees` raises :class:`RuntimeError`.
 
-Run ``python scripts/opensees_peer.py --elements-per-link 1 2 4 8 16`` for a
-mesh-convergence table, ``--json`` for machine-readable output.
+Run ``python scripts/opensees_peer.py --elements-per-link 1 2 4 8 16`` (or
+``--elements 9 10 11 12``: total counts along the column) for a mesh-convergence
+table, ``--json`` for machine-readable output.
 """
 
 from __future__ import annotations
@@ -239,15 +240,19 @@ def _build_model(
     elements_per_link: int,
     imperfection: float,
     lateral_load_ratio: float,
+    n_elements: int | None = None,
 ) -> tuple[int, int]:
     """Create the OpenSees model of the column (wipes the current domain).
+
+    The column has ``n_elements`` equal elements (default ``3 · elements_per_link``):
+    the two actuated joints are rigid, so element ends need not fall on them.
 
     Returns
     -------
     (end_node, mid_node) : tuple of int
         Tags of the end node and of the node nearest to mid-span.
     """
-    n_el = 3 * elements_per_link
+    n_el = 3 * elements_per_link if n_elements is None else int(n_elements)
     length = 3.0 * L
     w0 = imperfection * length
     sec = section_properties(a, b)
@@ -305,6 +310,7 @@ def critical_force(
     tol: float | None = None,
     linearized: bool = False,
     quiet: bool = True,
+    n_elements: int | None = None,
 ) -> dict[str, Any]:
     """Trace the compression of the column and return its critical (buckling) force.
 
@@ -375,6 +381,10 @@ def critical_force(
         Send OpenSees messages (warnings of failed, then cut, steps) to the
         null device instead of stderr.  OpenSees' log is process-wide, so this
         stays in force after the call.
+    n_elements : int, optional
+        Total number of equal elements along the column, overriding
+        ``3 · elements_per_link`` (any count >= 1: the actuated joints are
+        rigid, so element ends need not fall on them).
 
     Returns
     -------
@@ -388,7 +398,8 @@ def critical_force(
         (index into the arrays, -1 if none), ``completed`` (bool, the trace
         reached ``max_deflection``), ``n_steps`` (converged steps), ``n_cuts``
         (step halvings), ``wall_time`` (s, OpenSees model build and analysis
-        only), ``n_elements``, ``n_nodes``, ``elements_per_link``, the input
+        only), ``n_elements``, ``n_nodes``, ``elements_per_link`` (None when
+        ``n_elements`` is not a multiple of 3), the input
         parameters, and ``base_reaction_x`` (N, check: equals the last force).
 
     Raises
@@ -400,8 +411,8 @@ def critical_force(
     """
     if min(E, L, a, b) <= 0.0 or not (-1.0 < nu < 0.5):
         raise ValueError("need E, L, a, b > 0 and -1 < nu < 0.5")
-    if elements_per_link < 1 or steps < 1:
-        raise ValueError("need elements_per_link >= 1 and steps >= 1")
+    if elements_per_link < 1 or steps < 1 or (n_elements is not None and n_elements < 1):
+        raise ValueError("need elements_per_link >= 1, n_elements >= 1 and steps >= 1")
     if not 0.0 < knee_fraction < 1.0:
         raise ValueError("need 0 < knee_fraction < 1")
     if imperfection == 0.0 and lateral_load_ratio == 0.0:
@@ -417,14 +428,14 @@ def critical_force(
         raise ValueError("max_deflection must be positive")
     if tol is None:
         tol = 1e-12 * L
-    n_el = 3 * elements_per_link
+    n_el = 3 * elements_per_link if n_elements is None else int(n_elements)
 
     t0 = time.perf_counter()
     if quiet:
         ops.logFile(os.devnull, "-noEcho")
     end, _ = _build_model(
         ops, E=E, nu=nu, L=L, a=a, b=b, elements_per_link=elements_per_link,
-        imperfection=imperfection, lateral_load_ratio=lateral_load_ratio,
+        imperfection=imperfection, lateral_load_ratio=lateral_load_ratio, n_elements=n_el,
     )
     _static_analysis(ops, "BandSPD", tol, 50)
     du_nominal = max_deflection / steps
@@ -507,7 +518,7 @@ def critical_force(
         "wall_time": wall_time,
         "n_elements": n_el,
         "n_nodes": n_el + 1,
-        "elements_per_link": elements_per_link,
+        "elements_per_link": n_el // 3 if n_el % 3 == 0 else None,
         "base_reaction_x": base_reaction,
         "E": E, "nu": nu, "L": L, "a": a, "b": b,
         "max_deflection": max_deflection,
@@ -516,8 +527,8 @@ def critical_force(
         "knee_fraction": knee_fraction,
     }
     if linearized:
-        lin = linear_buckling_force(E=E, nu=nu, L=L, a=a, b=b,
-                                    elements_per_link=elements_per_link, quiet=quiet)
+        lin = linear_buckling_force(E=E, nu=nu, L=L, a=a, b=b, elements_per_link=elements_per_link,
+                                    quiet=quiet, n_elements=n_el)
         result["linear_buckling_force"] = lin["linear_buckling_force"]
         result["linear_relative_error"] = lin["relative_error"]
         result["linear_wall_time"] = lin["wall_time"]
@@ -536,6 +547,7 @@ def linear_buckling_force(
     elements_per_link: int = 8,
     reference_load: float | None = None,
     quiet: bool = True,
+    n_elements: int | None = None,
 ) -> dict[str, Any]:
     """Linearized (eigenvalue) buckling load of the perfect column.
 
@@ -548,8 +560,8 @@ def linear_buckling_force(
 
     Parameters
     ----------
-    E, nu, L, a, b, elements_per_link
-        As in :func:`critical_force` (Pa, -, m, m, m, -).
+    E, nu, L, a, b, elements_per_link, n_elements
+        As in :func:`critical_force` (Pa, -, m, m, m, -, -).
     reference_load : float, optional
         ``P_ref`` (N).  Default ``E I_y / (3L)²`` (about 10 % of the Euler load).
     quiet : bool
@@ -568,8 +580,11 @@ def linear_buckling_force(
     t0 = time.perf_counter()
     if quiet:
         ops.logFile(os.devnull, "-noEcho")
+    n_el = 3 * elements_per_link if n_elements is None else int(n_elements)
+    if n_el < 1:
+        raise ValueError("need at least one element")
     _build_model(ops, E=E, nu=nu, L=L, a=a, b=b, elements_per_link=elements_per_link,
-                 imperfection=0.0, lateral_load_ratio=0.0)
+                 imperfection=0.0, lateral_load_ratio=0.0, n_elements=n_el)
     _static_analysis(ops, "FullGeneral", 1e-12 * L, 20)
     ops.integrator("LoadControl", 0.0)
     ops.analysis("Static")
@@ -602,7 +617,7 @@ def linear_buckling_force(
         "euler_load": p_euler,
         "relative_error": p_lin / p_euler - 1.0,
         "wall_time": wall_time,
-        "n_elements": 3 * elements_per_link,
+        "n_elements": n_el,
     }
 
 
@@ -610,14 +625,19 @@ def linear_buckling_force(
 # Mesh study and command line                                                 #
 # --------------------------------------------------------------------------- #
 def convergence_study(
-    elements_per_link: Sequence[int] = (1, 2, 4, 8, 16), **kwargs: Any
+    elements_per_link: Sequence[int] = (1, 2, 4, 8, 16),
+    n_elements: Sequence[int] | None = None,
+    **kwargs: Any,
 ) -> list[dict[str, Any]]:
     """Run :func:`critical_force` for several meshes.
 
     Parameters
     ----------
     elements_per_link : sequence of int
-        Meshes to run.
+        Meshes to run (elements per link).
+    n_elements : sequence of int, optional
+        Meshes to run as total element counts along the column (any count);
+        replaces ``elements_per_link`` when given.
     **kwargs
         Passed to :func:`critical_force`.
 
@@ -626,6 +646,8 @@ def convergence_study(
     list of dict
         One result per mesh, in the given order.
     """
+    if n_elements is not None:
+        return [critical_force(n_elements=int(n), **kwargs) for n in n_elements]
     return [critical_force(elements_per_link=int(n), **kwargs) for n in elements_per_link]
 
 
@@ -654,6 +676,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         "between a universal joint and a spherical joint, compressed along x."
     )
     p.add_argument("--elements-per-link", type=int, nargs="+", default=[1, 2, 4, 8, 16])
+    p.add_argument("--elements", type=int, nargs="+", default=None,
+                   help="total element counts along the column (any count; replaces "
+                        "--elements-per-link)")
     p.add_argument("--E", type=float, default=2.1e11, help="Young's modulus (Pa)")
     p.add_argument("--nu", type=float, default=0.3, help="Poisson ratio")
     p.add_argument("--L", type=float, default=1.0, help="link length (m)")
@@ -677,7 +702,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     b = 0.05 * args.L if args.b is None else args.b
     try:
         results = convergence_study(
-            args.elements_per_link, E=args.E, nu=args.nu, L=args.L, a=a, b=b,
+            args.elements_per_link, n_elements=args.elements, E=args.E, nu=args.nu, L=args.L, a=a, b=b,
             max_deflection=args.max_deflection, steps=args.steps,
             imperfection=args.imperfection, lateral_load_ratio=args.lateral_load_ratio,
             knee_fraction=args.knee_fraction, linearized=args.linearized,
@@ -706,7 +731,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         head += f" {'P_lin (N)':>12} {'err_lin':>9}"
     print(head)
     for r in results:
-        line = (f"{r['elements_per_link']:>7d} {r['n_elements']:>5d} {r['critical_force']:>12.6g} "
+        epl = r["elements_per_link"]
+        line = (f"{'-' if epl is None else epl:>7} {r['n_elements']:>5d} {r['critical_force']:>12.6g} "
                 f"{100 * r['relative_error']:>8.3f}% {r['critical_deflection']:>11.4e} "
                 f"{r['n_steps']:>6d} {r['n_cuts']:>5d} {r['wall_time']:>9.3f}")
         if args.linearized:

@@ -121,3 +121,54 @@ def test_ur5_benchmark_structure(bench):
     assert out["nv"] == out["n_theta"] == 6 + 6 * len(bench.UR5_LINKS)
     assert out["curve"]["iterations"] >= 0 and out["curve"]["time"]["min"] > 0
     assert out["floor"]["min"] > 0 and out["eq30"]["min"] > 0
+
+
+_NO_OPENSEES = importlib.util.find_spec("openseespy") is None
+
+
+@pytest.mark.skipif(_NO_OPENSEES, reason="OpenSeesPy (the 'bench' extra) is not installed")
+def test_opensees_peer_converges_to_euler(bench):
+    """The OpenSees peer's column buckles at Euler's closed form as the mesh is refined: the
+    linearised load falls towards it as 1/n² (corotational elastic beams), any element count
+    is allowed (n_elements) and agrees with the per-link count, and the nonlinear trace's knee
+    agrees with the linearised load of the same mesh."""
+    peer = bench.load_peer()
+    b = bench.PAPER_BEAM
+    kw = {"E": b["E"], "nu": b["nu"], "L": 1.0, "a": b["a"], "b": b["b"]}
+    euler = np.pi**2 * b["E"] * (b["b"] * b["a"] ** 3 / 12.0) / 3.0**2
+    assert peer.euler_load(**{k: kw[k] for k in ("E", "L", "a", "b")}) == pytest.approx(euler, rel=1e-14)
+    err = {n: peer.linear_buckling_force(n_elements=n, **kw)["linear_buckling_force"] / euler - 1.0 for n in (5, 10, 20)}
+    assert 0 < err[20] < err[10] < err[5]
+    assert 0.2 < err[10] / err[5] < 0.3 and 0.2 < err[20] / err[10] < 0.3, err
+    per_link = peer.linear_buckling_force(elements_per_link=2, **kw)
+    assert per_link["n_elements"] == 6
+    assert per_link["linear_buckling_force"] == pytest.approx(
+        peer.linear_buckling_force(n_elements=6, **kw)["linear_buckling_force"], rel=1e-12)
+    nl = peer.critical_force(n_elements=10, max_deflection=2 * 3 * euler / (b["E"] * b["a"] * b["b"]), steps=10, **kw)
+    assert nl["buckled"] and nl["n_elements"] == 10
+    assert nl["critical_force"] == pytest.approx((1 + err[10]) * euler, rel=2e-3)
+
+
+@pytest.mark.skipif(_NO_OPENSEES, reason="OpenSeesPy (the 'bench' extra) is not installed")
+def test_opensees_same_accuracy_comparison(bench):
+    """Issue 14's comparison picks the coarsest OpenSees mesh within the tolerance of Euler's
+    load, and both codes' critical forces are the ones their own methods give."""
+    tol = 0.1
+    o = bench.bench_opensees_same_accuracy(2, repeats=1, tol=tol)
+    assert "skipped" not in o, o.get("skipped")
+    b = bench.PAPER_BEAM
+    euler = np.pi**2 * b["E"] * (b["b"] * b["a"] ** 3 / 12.0) / 3.0**2
+    assert o["euler_load"] == pytest.approx(euler, rel=1e-14)
+    n = o["opensees_elements"]
+    errs = o["opensees_mesh_errors"]
+    assert abs(errs[n]) <= tol and not abs(errs[n - 1]) <= tol, errs  # the coarsest within tol
+    r = o["results"]
+    assert r["opensees"]["rel_err"] == pytest.approx(errs[n], abs=1e-12)
+    vm2 = bench.paper_model(2)
+    assert r["vjm_curve"]["critical_force"] == pytest.approx(bench.vjm_eigen_critical_force(vm2), rel=2e-3)
+    assert r["vjm_eig"]["critical_force"] == pytest.approx(bench.vjm_eigen_critical_force(vm2), rel=1e-10)
+    for v in r.values():
+        assert v["rel_err"] == pytest.approx(v["critical_force"] / euler - 1.0, rel=1e-12)
+    assert o["vjm_within_tol"] == (abs(r["vjm_curve"]["rel_err"]) <= tol)
+    text = "\n".join(bench.format_opensees_same_accuracy(o))
+    assert f"OpenSees {n} corotational elements" in text
