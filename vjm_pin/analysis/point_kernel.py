@@ -42,7 +42,6 @@ generic path, and the analytic ``dμ/ds`` with finite differences.
 
 from __future__ import annotations
 
-import os
 import sys
 
 import numpy as np
@@ -525,14 +524,10 @@ _compiled = None  # the compiled _point_loops once loaded, False when numba is u
 
 
 def _jit_mode() -> str:
-    """``VJM_PIN_JIT`` read now (the solver's switch, :mod:`vjm_pin.solver.kernel`): ``"0"``
-    (numpy), ``"1"`` (compiled) or ``"auto"``."""
-    v = os.environ.get("VJM_PIN_JIT", "auto").strip().lower()
-    if v in ("0", "false", "no", "off"):
-        return "0"
-    if v in ("1", "true", "yes", "on"):
-        return "1"
-    return "auto"
+    """``VJM_PIN_JIT`` read now: the solver's switch (:func:`vjm_pin.solver.kernel.mode`)."""
+    from vjm_pin.solver.kernel import mode
+
+    return mode()
 
 
 def compiled():

@@ -77,7 +77,10 @@ def chain_context(vm: VjmModel, state: KinematicState, wrench: np.ndarray) -> Ch
     n = len(vm.theta_idx) + len(vm.q_idx)
     if n < CHAIN_MIN_N:
         return None
-    from vjm_pin.solver.chain_algebra import chain_layout, compiled_available  # lazy: long chains only
+    from vjm_pin.solver.chain_algebra import (  # lazy: long chains only
+        chain_layout,
+        compiled_available,
+    )
 
     if n < CHAIN_MIN_N_NUMPY and not compiled_available():
         return None

@@ -57,12 +57,13 @@ and mode). :func:`vjm_pin.solver.blocks.evaluate_blocks` attaches what these nee
 
 from __future__ import annotations
 
-import os
 import sys
 from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
+
+from vjm_pin.solver.kernel import mode as _jit_mode  # numpy only: numba stays lazy
 
 #: ``"auto"`` (numba when importable), ``"numba"`` or ``"numpy"``.
 BACKEND = "auto"
@@ -188,7 +189,7 @@ class Factor:
 
 
 #: ``VJM_PIN_JIT=0`` (the solver's switch) in the environment at import: the numpy recursion.
-_NO_NUMBA = os.environ.get("VJM_PIN_JIT", "auto").strip().lower() in ("0", "false", "no", "off")
+_NO_NUMBA = _jit_mode() == "0"
 
 
 def _use_numba() -> bool:
@@ -208,7 +209,7 @@ def compiled_available() -> bool:
         return False
     if _KERNELS:
         return _KERNELS[0] is not None
-    wanted = os.environ.get("VJM_PIN_JIT", "auto").strip().lower() in ("1", "true", "yes", "on")
+    wanted = _jit_mode() == "1"
     if BACKEND == "numba" or wanted or "numba" in sys.modules:
         import importlib.util
 
