@@ -805,27 +805,36 @@ class _Tracer:
         def mu(f):
             return _max_eig(check_stability_held(self.blocks(x, f * self.d), self.P))
 
-        scale = max(self.solver.kscale / self.solver.length_scale, 1e-300)
-        lo, hi = 0.0, 1e-6 * scale
-        flo, fhi = mu(lo), mu(hi)
-        while fhi < 0:
-            lo, flo, hi = hi, fhi, 2 * hi
-            fhi = mu(hi)
-            if hi > 1e9 * scale:
-                return None
-        lo, flo, hi, fhi, _, _ = illinois(
-            lambda f, a, b: (f, mu(f)),
-            lo,
-            flo,
-            hi,
-            fhi,
-            float,
-            lambda a, b, m, f: b - a <= 1e-14 * b,
-            MAX_BISECTIONS,
-        )
-        f = lo + flo / (flo - fhi) * (hi - lo) if fhi != flo else hi
+        f = rigid_start_force(mu, max(self.solver.kscale / self.solver.length_scale, 1e-300))
+        if f is None:
+            return None
         eq = replace(p0.eq, wrench=f * self.d)
         return f, self.point(eq, 0.0)
+
+
+def rigid_start_force(mu, scale: float) -> float | None:
+    """The force (N) along a rigid start direction at which the force-control margin ``mu(f)``
+    crosses zero: doubling from ``1e-6·scale`` to bracket it, then :func:`illinois` and a final
+    secant; None when no crossing below ``1e9·scale`` (``scale`` a stiffness per length, N/m).
+    Shared by the serial and the mechanism tracers."""
+    lo, hi = 0.0, 1e-6 * scale
+    flo, fhi = mu(lo), mu(hi)
+    while fhi < 0:
+        lo, flo, hi = hi, fhi, 2 * hi
+        fhi = mu(hi)
+        if hi > 1e9 * scale:
+            return None
+    lo, flo, hi, fhi, _, _ = illinois(
+        lambda f, a, b: (f, mu(f)),
+        lo,
+        flo,
+        hi,
+        fhi,
+        float,
+        lambda a, b, m, f: b - a <= 1e-14 * b,
+        MAX_BISECTIONS,
+    )
+    return lo + flo / (flo - fhi) * (hi - lo) if fhi != flo else hi
 
 
 def _curve_point(p: _BP, thr: float) -> CurvePoint:

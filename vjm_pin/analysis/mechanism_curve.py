@@ -32,7 +32,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from vjm_pin.analysis.curve import _BP, MAX_BISECTIONS, CurvePoint, _Tracer, illinois
+from vjm_pin.analysis.curve import _BP, CurvePoint, _Tracer, rigid_start_force
 from vjm_pin.exceptions import InputError, NoEquilibrium
 from vjm_pin.kinematics.chain import displace, flush_tiny
 from vjm_pin.solver.mechanism import (
@@ -401,19 +401,9 @@ class MechanismTracer(_Tracer):
             lin = self.force_control_lin(x, f)
             return self.evaluate(lin, need_tangent=False)[0]
 
-        scale = max(self.run.kscale / self.run.length_scale, 1e-300)
-        lo, hi = 0.0, 1e-6 * scale
-        flo, fhi = mu(lo), mu(hi)
-        while fhi < 0:
-            lo, flo, hi = hi, fhi, 2 * hi
-            fhi = mu(hi)
-            if hi > 1e9 * scale:
-                return None
-        lo, flo, hi, fhi, _, _ = illinois(
-            lambda f, a, b: (f, mu(f)), lo, flo, hi, fhi, float,
-            lambda a, b, m, f: b - a <= 1e-14 * b, MAX_BISECTIONS,
-        )
-        f = lo + flo / (flo - fhi) * (hi - lo) if fhi != flo else hi
+        f = rigid_start_force(mu, max(self.run.kscale / self.run.length_scale, 1e-300))
+        if f is None:
+            return None
         lin = self.force_control_lin(x, f)
         eq = replace(p0.eq, wrench=lin.wrench, closure_multipliers=lin.closure_multipliers)
         return f, self.point(eq, 0.0, lin)
