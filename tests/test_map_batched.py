@@ -59,6 +59,30 @@ def test_a_pose_does_not_depend_on_its_chunk(ur5):
             assert np.array_equal(alone[f], together[i][f]), f
 
 
+def test_the_batch_shares_the_threads_pin_data(ur5):
+    """The batch computes on the thread's shared ``pin.Data`` (kinematics/shared.py): other users
+    of that Data at other configurations between two batched solves (the per-pose path of a
+    hand-back, a solver) change no number, bit for bit."""
+    import pinocchio as pin
+
+    from vjm_pin.analysis.batched import BatchedChain
+    from vjm_pin.kinematics.shared import data_for
+    from vjm_pin.solver import EquilibriumSolver
+
+    names, poses = sample_poses(ur5, 12, seed=21)
+    w = np.array([10.0, -5.0, -120.0, 1.0, 0.0, -2.0])
+    chain = BatchedChain(ur5)
+    first = chain.solve_arrays(names, poses, w)
+    EquilibriumSolver(ur5).solve_wrench(2.0 * w)  # another user of the same Data, elsewhere
+    data = data_for(ur5.model)
+    pin.computeJointJacobians(ur5.model, data, pin.randomConfiguration(ur5.model))
+    pin.updateFramePlacements(ur5.model, data)
+    again = BatchedChain(ur5).solve_arrays(names, poses[::-1], w)
+    assert first[0].sum() >= 10
+    for a, b in zip(first, again):
+        assert np.array_equal(a, b[::-1], equal_nan=True)
+
+
 def test_singular_and_overloaded_poses_are_handed_back(monkeypatch):
     """Poses the batch cannot vouch for (a stretched elbow: K_C singular; a load the pose
     cannot carry) go to the per-pose path, whose verdict the map reports."""

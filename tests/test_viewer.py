@@ -336,6 +336,26 @@ def test_animation_input_errors(chain):
         Animation(model, geom, frames, frame_name="hand", critical_index=3)
 
 
+@pytest.mark.parametrize(
+    "bad,words",
+    [([1.0, 2.0, 3.0, 4.0], "3 or 6 components"), ([1.0, float("nan"), 0.0], "NaN"), ("abc", "numbers")],
+)
+def test_animation_forces_are_three_or_six_finite_numbers(chain, bad, words):
+    """The "3 or 6 numbers" check of ``forces`` is task_vector's (one line naming the entry);
+    a wrench draws its force part."""
+    model, geom = chain
+    frames, _, forces = bending_motion(model)
+    given = list(forces)
+    given[1] = bad
+    with pytest.raises(InputError, match=rf"forces\[1\].*{words}|{words}.*forces\[1\]") as e:
+        Animation(model, geom, frames, forces=given, frame_name="tool")
+    assert "\n" not in str(e.value)
+    wrenches = [np.concatenate([f, [7.0, -8.0, 9.0]]) for f in forces]
+    anim = Animation(model, geom, frames, forces=wrenches, frame_name="tool")
+    for got, f in zip(anim.forces, forces):
+        np.testing.assert_allclose(got, np.asarray(f, float)[:3], rtol=0, atol=0)
+
+
 def test_export_html_is_self_contained(chain, tmp_path):
     model, geom = chain
     frames, stable, forces = bending_motion(model)

@@ -7,8 +7,9 @@ iteration** (the first attempt of ``solve_wrench``: plain Newton steps from the 
 each kept only if it halves the residual and stays within the step limit, then up to
 ``POLISH_ITERATIONS`` polishing steps) runs on a whole chunk at once:
 
-- one Pinocchio call per pose per iteration (``computeFrameJacobian`` on one shared ``pin.Data``,
-  which also leaves the end placement in ``data.oMf``); nothing else per pose in Python;
+- one Pinocchio call per pose per iteration (``computeFrameJacobian`` on the thread's shared
+  ``pin.Data``, :func:`vjm_pin.kinematics.shared.data_for`, which also leaves the end placement in
+  ``data.oMf``); nothing else per pose in Python;
 - the Hessian of ``Ψ = g(θ)ᵀF`` (eq. 16) in screw form from J
   (:func:`vjm_pin.kinematics.screw.psi_hessian_screw`) for all poses as stacked matrix products;
 - the Newton steps ``(K_θ − H) Δθ = −r`` of eq. (5) with one stacked ``np.linalg.solve``;
@@ -50,6 +51,7 @@ import pinocchio as pin
 
 from vjm_pin.kinematics.chain import flush_tiny
 from vjm_pin.kinematics.screw import screw_applicable, support_mask
+from vjm_pin.kinematics.shared import data_for
 from vjm_pin.model.format import VjmModel
 from vjm_pin.solver.equilibrium import LOCAL_MAX_ITER, POLISH_ITERATIONS, POLISH_STEP
 
@@ -92,14 +94,16 @@ def batch_applicable(vm: VjmModel, gravity=None, loads=()) -> bool:
 
 
 class BatchedChain:
-    """The constant data of one model for batched solves (one per model and thread; it holds the
-    thread's ``pin.Data``)."""
+    """The constant data of one model for batched solves (one per model and thread,
+    :func:`shared_chain`). Its Pinocchio calls use the calling thread's shared ``pin.Data``
+    (:func:`vjm_pin.kinematics.shared.data_for`, looked up per call): each call recomputes at its
+    own configuration what it reads and copies it out before returning, the contract of that
+    module, so the per-pose path's hand-backs on the same worker may share that Data."""
 
     def __init__(self, vm: VjmModel, jit: bool = False):
         self.vm = vm
         self.jit = bool(jit)  # the compiled kernel (:func:`kernel`) for the Newton systems
         model = self.model = vm.model
-        self.data = model.createData()
         self.fid = vm.frame_id
         nv = model.nv
         self.free = np.asarray(vm.theta_idx, int)
@@ -131,7 +135,7 @@ class BatchedChain:
         if plan is not None:
             return plan
         model = self.model
-        data = model.createData()
+        data = data_for(model)
         pin.computeJointJacobians(model, data, pin.neutral(model))
         col = {model.getJointId(n): c for c, n in enumerate(names)}
         ref = self.vm.reference
@@ -225,7 +229,8 @@ class BatchedChain:
     def _evaluate(self, xa: np.ndarray):
         """(A, 6, n) end-frame Jacobians (``LOCAL_WORLD_ALIGNED``, free columns) and (A, 4, 4) end
         placements at the configurations ``xa``: one Pinocchio call per pose."""
-        model, data, fid = self.model, self.data, self.fid
+        model, fid = self.model, self.fid
+        data = data_for(model)
         cfj, lwa, omf = pin.computeFrameJacobian, pin.LOCAL_WORLD_ALIGNED, data.oMf
         ja = np.empty((xa.shape[0], 6, model.nv))
         ha = np.empty((xa.shape[0], 4, 4))
@@ -663,7 +668,7 @@ _CHAIN_CACHE: dict = {}
 
 
 def shared_chain(vm: VjmModel, jit: bool = False) -> BatchedChain:
-    """This thread's :class:`BatchedChain` of ``vm`` (one ``pin.Data`` per worker thread), using the
+    """This thread's :class:`BatchedChain` of ``vm`` (on the thread's shared ``pin.Data``), using the
     compiled kernel when ``jit``."""
     key = (id(vm), threading.get_ident())
     hit = _CHAIN_CACHE.get(key)

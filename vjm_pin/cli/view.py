@@ -556,8 +556,10 @@ def _critical_brackets(solver, pts, critical, d):
 def _arc_lengths(vm, samples):
     """``(seg, arc)``: the normalised (deflection, force, shape) length of each sample
     interval and their running sum from 0 (:func:`curve_frames`)."""
+    from vjm_pin.kinematics.shared import data_for
+
     m = len(samples)
-    data = vm.model.createData()
+    data = data_for(vm.model)
     joints = [_joint_positions(vm, data, f.x) for f in samples]
     s_arr = np.array([f.deflection for f in samples])
     f_arr = np.array([f.force for f in samples])
@@ -1111,7 +1113,9 @@ def robot_size(vm) -> float:
     """Diagonal of the bounding box of the joint origins and frames of the unloaded robot (m)."""
     import pinocchio as pin
 
-    data = vm.model.createData()
+    from vjm_pin.kinematics.shared import data_for
+
+    data = data_for(vm.model)
     pin.framesForwardKinematics(vm.model, data, np.asarray(vm.reference, float))
     pts = np.array([m.translation for m in data.oMi] + [m.translation for m in data.oMf])
     return max(float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0))), 1e-3)
@@ -1480,9 +1484,7 @@ def _run_serial(args, vm) -> int:
         if force is not None:
             kw["ellipsoid"], kw["ellipsoid_label"] = drawn, ellipsoid_label(vm, force)
         ell = (force, data)
-    body = _load_view_dict(vm, kind, ts, path, scale, args.html)
-    body["ellipsoid"] = _ellipsoid_dict(vm, ell)
-    body["meshes"] = _meshes_dict(kw.pop("_meshes"))
+    body = _load_view_dict(vm, kind, ts, path, scale, args.html, ell, kw.pop("_meshes"))
     return _finish_load_page(args, vm, geom, shown, scale, kw, path[-1].stable, body)
 
 
@@ -1519,9 +1521,7 @@ def _run_mechanism(args, vm, loads) -> int:
         vm, path, kind, loads, args.scale, args.ellipsoid, meshes=args.meshes
     )
     ell = kw.pop("_ellipsoid", None)
-    body = _mechanism_view_dict(vm, kind, path, scale, args.html, loads)
-    body["ellipsoid"] = _ellipsoid_dict(vm, ell)
-    body["meshes"] = _meshes_dict(kw.pop("_meshes"))
+    body = _mechanism_view_dict(vm, kind, path, scale, args.html, loads, ell, kw.pop("_meshes"))
     return _finish_load_page(args, vm, geom, shown, scale, kw, path[-1].result.stable, body)
 
 
@@ -1613,40 +1613,78 @@ def _dump_view(body: dict) -> str:
     return dump_json(envelope("view", {k: body.get(k) for k in VIEW_KEYS}, UNIT_KEYS))
 
 
+def _view_body(
+    vm,
+    mode,
+    html,
+    scale,
+    frames,
+    *,
+    parallel,
+    loads=(),
+    direction=None,
+    critical=(),
+    critical_frame=None,
+    branches=0,
+    ellipsoid=None,
+    meshes=None,
+) -> dict:
+    """The ``view --json`` body (keys :data:`VIEW_KEYS` but ``snapshots``), one builder for
+    every page: ``frames`` are the JSON frames already built, ``loads`` the dead loads
+    (:class:`~vjm_pin.kinematics.dead_loads.Load` s), ``ellipsoid`` the ``(force, per-frame data)``
+    of :func:`ellipsoid_frames` or None, ``meshes`` the scene's visuals (:func:`_meshes_dict`)."""
+    return {
+        "model": vm.name,
+        "parallel": parallel,
+        "mode": mode,
+        "direction": direction,
+        "html": str(html),
+        "scale": scale,
+        "frames": frames,
+        "critical": list(critical),
+        "critical_frame": critical_frame,
+        "branches": branches,
+        "closures": [c.name for c in vm.closures],
+        "loads": [{"frame": ld.frame, "wrench": ld.wrench} for ld in loads],
+        "ellipsoid": _ellipsoid_dict(vm, ellipsoid),
+        "meshes": _meshes_dict(meshes),
+    }
+
+
 def _curve_view_dict(vm, curve, cp, html) -> dict:
     """The ``view --curve --json`` body: the frames of the page ``cp`` (:class:`CurvePage`)."""
     from vjm_pin.cli.curve import CRITICAL_KEYS, critical_dict
 
-    return {
-        "model": vm.name,
-        "parallel": _is_parallel(vm),
-        "mode": "curve",
-        "direction": curve.direction,
-        "html": str(html),
-        "scale": cp.scale,
-        "frames": [
-            {
-                "deflection": f.deflection,
-                "force": f.force,
-                "wrench": f.wrench,
-                "stable": f.stable,
-                "kind": f.kind,
-            }
-            for f in cp.curve_frames
-        ],
-        "critical": [{k: critical_dict(c).get(k) for k in CRITICAL_KEYS} for c in curve.critical],
-        "critical_frame": cp.critical_frame,
-        "branches": cp.branches,
-        "closures": [c.name for c in vm.closures],
-        "loads": [{"frame": ld.frame, "wrench": ld.wrench} for ld in getattr(curve, "loads", ()) or ()],
-        "ellipsoid": _ellipsoid_dict(vm, cp.ellipsoid),
-        "meshes": _meshes_dict(cp.meshes),
-    }
+    frames = [
+        {
+            "deflection": f.deflection,
+            "force": f.force,
+            "wrench": f.wrench,
+            "stable": f.stable,
+            "kind": f.kind,
+        }
+        for f in cp.curve_frames
+    ]
+    return _view_body(
+        vm,
+        "curve",
+        html,
+        cp.scale,
+        frames,
+        parallel=_is_parallel(vm),
+        loads=getattr(curve, "loads", ()) or (),
+        direction=curve.direction,
+        critical=[{k: critical_dict(c).get(k) for k in CRITICAL_KEYS} for c in curve.critical],
+        critical_frame=cp.critical_frame,
+        branches=cp.branches,
+        ellipsoid=cp.ellipsoid,
+        meshes=cp.meshes,
+    )
 
 
-def _load_view_dict(vm, kind, ts, results, scale, html) -> dict:
-    """The ``view --deflection/--wrench --json`` body: one frame per equilibrium of the load
-    path (the unloaded robot at load factor 0, as drawn)."""
+def _load_view_dict(vm, kind, ts, results, scale, html, ellipsoid, meshes) -> dict:
+    """The ``view --deflection/--wrench --json`` body of a serial chain: one frame per
+    equilibrium of the load path (the unloaded robot at load factor 0, as drawn)."""
     frames = []
     for t, r in zip(ts, results):
         zero = t == 0
@@ -1659,20 +1697,9 @@ def _load_view_dict(vm, kind, ts, results, scale, html) -> dict:
                 "kind": "load",
             }
         )
-    return {
-        "model": vm.name,
-        "parallel": False,
-        "mode": kind,
-        "direction": None,
-        "html": str(html),
-        "scale": scale,
-        "frames": frames,
-        "critical": [],
-        "critical_frame": None,
-        "branches": 0,
-        "closures": [c.name for c in vm.closures],
-        "loads": [],
-    }
+    return _view_body(
+        vm, kind, html, scale, frames, parallel=False, ellipsoid=ellipsoid, meshes=meshes
+    )
 
 
 def _is_parallel(vm) -> bool:
@@ -1680,7 +1707,7 @@ def _is_parallel(vm) -> bool:
     return bool(getattr(vm, "legs", ()))
 
 
-def _mechanism_view_dict(vm, kind, path, scale, html, loads) -> dict:
+def _mechanism_view_dict(vm, kind, path, scale, html, loads, ellipsoid, meshes) -> dict:
     """The ``view --json`` body of a mechanism load path (:func:`mechanism_load_path`): one
     frame per equilibrium with both verdicts and the number of unstable modes."""
     frames = [
@@ -1696,20 +1723,17 @@ def _mechanism_view_dict(vm, kind, path, scale, html, loads) -> dict:
         }
         for f in path
     ]
-    return {
-        "model": vm.name,
-        "parallel": _is_parallel(vm),
-        "mode": kind,
-        "direction": None,
-        "html": str(html),
-        "scale": scale,
-        "frames": frames,
-        "critical": [],
-        "critical_frame": None,
-        "branches": 0,
-        "closures": [c.name for c in vm.closures],
-        "loads": [{"frame": ld.frame, "wrench": ld.wrench} for ld in loads],
-    }
+    return _view_body(
+        vm,
+        kind,
+        html,
+        scale,
+        frames,
+        parallel=_is_parallel(vm),
+        loads=loads,
+        ellipsoid=ellipsoid,
+        meshes=meshes,
+    )
 
 
 def _ellipsoid_dict(vm, ell):

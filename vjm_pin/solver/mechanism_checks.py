@@ -39,6 +39,13 @@ import pinocchio as pin
 from vjm_pin.exceptions import NoEquilibrium, SingularStiffness
 from vjm_pin.kinematics.chain import deflection as pose_deflection
 from vjm_pin.kinematics.closures import jlog3, skew
+from vjm_pin.kinematics.shared import data_for
+from vjm_pin.solver.checks import (
+    softest_direction,
+    statics_relative,
+    stiffness_fd_error,
+    verdict_agrees,
+)
 
 #: Tolerances of the checks: K_C against re-solved equilibria (relative), the eq. (5) residual
 #: per row (relative to its scale; as :data:`vjm_pin.solver.equilibrium.VERIFY_STATICS`), the
@@ -109,12 +116,18 @@ class MechanismCheck:
 
 
 class _PinEvaluator:
-    """Frame placements, Jacobians, dead loads and closures straight from Pinocchio."""
+    """Frame placements, Jacobians, dead loads and closures straight from Pinocchio.
+
+    It works on the thread's shared ``pin.Data`` of the model
+    (:func:`vjm_pin.kinematics.shared.data_for`; a private one of a large mechanism costs seconds
+    and hundreds of MB): every read (:meth:`frame`, :meth:`load_force`, :meth:`closure_rows`)
+    follows its own :meth:`update` within one check, with no other user of the Data between,
+    and copies what it keeps."""
 
     def __init__(self, solver):
         vm = solver.vm
         self.vm, self.model = vm, vm.model
-        self.data = self.model.createData()
+        self.data = data_for(self.model)
         self.loads = [(ld, int(self.model.getFrameId(ld.frame))) for ld in solver.loads.loads]
         g = solver.loads.gravity
         self.gravity = None if g is None or not np.any(g) else np.asarray(g, float)
@@ -191,28 +204,66 @@ def check_mechanism(solver, res, *, deflection=None, method="eq28", rtol=VERIFY_
     :class:`~vjm_pin.solver.mechanism.MechanismSolver`); see :meth:`MechanismSolver.verify`."""
     if not res.converged:
         raise NoEquilibrium("the equilibrium did not converge: nothing to check", res, res.residual())
-    vm, free, nt = solver.vm, solver.free, solver.nt
-    lc = solver.length_scale
-    tarr = np.asarray(solver.task, int)
     # held task rows: components, or the orthonormal held axes of a solver with custom task axes
     axes = getattr(res, "held_axes", None)
+    tarr = np.asarray(solver.task, int)
     hm = np.eye(6)[[c for c in tarr if c in set(res.held)]] if axes is None else np.asarray(axes, float)
-    hm = hm.reshape(-1, 6)
-    ev = _PinEvaluator(solver)
-    x = np.asarray(res.x, float).copy()
-    w6 = np.asarray(res.wrench, float)
-    ev.update(x)
-    p, rot, jend = ev.frame(vm.frame_id)
-    cres, cjac = ev.closure_rows()
-    nc = cres.size
-    # 1. eq. (5) with multipliers recomputed from scratch
-    tau = np.zeros(len(free))
-    tau[:nt] = vm.K_theta @ (x[vm.theta_idx] - vm.theta0)
-    qload = ev.load_force()[free]
+    at = _At(solver, res, hm.reshape(-1, 6))
+    st = _statics(solver, res, at)
+    geo = _geometry(solver, res, at, deflection)
+    stab = _stability(solver, res, at, st["a"], st["mu"])
+    checked, kerr = False, float("nan")
+    if stiffness:
+        try:
+            kc = solver.stiffness(res, method).task_stiffness
+        except SingularStiffness:
+            kc = None
+        if kc is not None:
+            checked, kerr = True, _stiffness_error(solver, res, kc, rtol)
+    stiffness_ok = bool(not checked or kerr <= rtol)
+    return MechanismCheck(
+        statics_relative=st["statics"],
+        statics_ok=st["ok"],
+        closure_multipliers=st["mu"].copy(),
+        task_reaction=at.hm.T @ st["lam"],
+        multipliers_relative=st["mult_rel"],
+        reaction_relative=st["react_rel"],
+        **geo,
+        **stab,
+        stiffness_checked=checked,
+        stiffness_relative_error=kerr,
+        stiffness_ok=stiffness_ok,
+        ok=bool(st["ok"] and geo["geometry_ok"] and stab["stability_ok"] and stiffness_ok),
+    )
+
+
+class _At:
+    """What the checks read at the configuration of the result, recomputed with Pinocchio
+    (:class:`_PinEvaluator`): end placement and Jacobian, closure rows, spring forces, loads."""
+
+    def __init__(self, solver, res, hm):
+        vm = solver.vm
+        self.hm = hm  # (h, 6) held task rows
+        self.ev = ev = _PinEvaluator(solver)
+        self.x = x = np.asarray(res.x, float).copy()
+        self.w6 = np.asarray(res.wrench, float)
+        ev.update(x)
+        self.p, self.rot, self.jend = ev.frame(vm.frame_id)
+        self.cres, self.cjac = ev.closure_rows()
+        self.tau = np.zeros(len(solver.free))
+        self.tau[: solver.nt] = vm.K_theta @ (x[vm.theta_idx] - vm.theta0)
+        self.qload = ev.load_force()[solver.free]
+
+
+def _statics(solver, res, at) -> dict:
+    """Check 1: eq. (5) with the multipliers recomputed from scratch (module docstring)."""
+    free, lc, ev, hm, w6 = solver.free, solver.length_scale, at.ev, at.hm, at.w6
+    tau, qload, jf = at.tau, at.qload, at.jend[:, free]
+    nc = at.cres.size
     lam_res = hm @ w6  # the reaction on the held rows; the rest of w6 is the dead task wrench
     wl = w6 - hm.T @ lam_res
-    g = tau - qload - jend[:, free].T @ wl
-    a = np.vstack([cjac[:, free], hm @ jend[:, free]])
+    g = tau - qload - jf.T @ wl
+    a = np.vstack([at.cjac[:, free], hm @ jf])
     nu = np.linalg.lstsq(a.T, g, rcond=solver.rank_rtol)[0] if a.shape[0] else np.zeros(0)
     r = g - a.T @ nu
     mu, lam = nu[:nc], nu[nc:]
@@ -223,6 +274,21 @@ def check_mechanism(solver, res, *, deflection=None, method="eq28", rtol=VERIFY_
     big_gen = max(np.abs(gen).max() if gen.size else 0.0, np.abs(tau).max() if tau.size else 0.0,
                   np.abs(qload).max() if qload.size else 0.0, 1e-300)
     react_rel = float(np.abs(gen - gen_res).max() / big_gen) if gen.size else 0.0
+    fmax, mmax = _largest_force_and_moment(ev, w6, mu)
+    prism = solver._prism
+    floor = 1e-12 * solver.kscale * np.where(prism, 1.0, lc)  # an unloaded equilibrium
+    statics = statics_relative(r, tau, prism, fmax, mmax, lc, floor)
+    off_task = [i for i in range(6) if i not in set(np.asarray(solver.task, int).tolist())]
+    ok = bool(
+        statics <= VERIFY_STATICS and not np.any(w6[off_task]) and mult_rel <= VERIFY_MULTIPLIERS
+        and react_rel <= VERIFY_MULTIPLIERS
+    )
+    return {"statics": statics, "ok": ok, "a": a, "mu": mu, "lam": lam, "mult_rel": mult_rel, "react_rel": react_rel}
+
+
+def _largest_force_and_moment(ev, w6, mu) -> tuple[float, float]:
+    """The largest force (N) and moment (N·m) of every wrench in eq. (5): the task wrench, the
+    dead loads, the weight of the links, the closure multipliers ``mu``."""
     forces = [w6, *(ld.wrench for ld, _ in ev.loads)]
     fmax = max(np.abs(f[:3]).max() for f in forces)
     mmax = max(np.abs(f[3:]).max() for f in forces)
@@ -238,29 +304,39 @@ def check_mechanism(solver, res, *, deflection=None, method="eq28", rtol=VERIFY_
             else:
                 mmax = max(mmax, abs(v))
         k += len(idx)
-    prism = solver._prism
-    scale = np.where(prism, np.maximum(np.abs(tau), fmax + mmax / lc), np.maximum(np.abs(tau), fmax * lc + mmax))
-    scale = np.maximum(scale, 1e-3 * np.abs(tau).max() if tau.size else 0.0)
-    scale = np.maximum(scale, 1e-12 * solver.kscale * np.where(prism, 1.0, lc))  # an unloaded equilibrium
-    statics = float((np.abs(r) / scale).max()) if r.size else 0.0
-    off_task = [i for i in range(6) if i not in set(tarr.tolist())]
-    statics_ok = bool(
-        statics <= VERIFY_STATICS and not np.any(w6[off_task]) and mult_rel <= VERIFY_MULTIPLIERS
-        and react_rel <= VERIFY_MULTIPLIERS
-    )
-    # 2. closures and held rows
-    cpos = np.array([i < 3 for c, *_ in ev.closures for i in c.indices], bool)
+    return fmax, mmax
+
+
+def _geometry(solver, res, at, deflection) -> dict:
+    """Check 2: closure residuals and held task rows (module docstring)."""
+    lc, hm = solver.length_scale, at.hm
+    cpos = np.array([i < 3 for c, *_ in at.ev.closures for i in c.indices], bool)
+    cres = at.cres
     cp = float(np.abs(cres[cpos]).max()) if np.any(cpos) else 0.0
     cr = float(np.abs(cres[~cpos]).max()) if np.any(~cpos) else 0.0
-    d_now = pose_deflection(solver.p0, solver.r0, p, rot)
+    d_now = pose_deflection(solver.p0, solver.r0, at.p, at.rot)
     d_ref = np.asarray(res.deflection, float) if deflection is None else solver._vector6(deflection, "deflection", "m, rad")
     herr = np.abs(hm @ (d_now - d_ref))
     trans = np.any(hm[:, :3] != 0, axis=1)
     pos_err = float(herr[trans].max()) if np.any(trans) else 0.0
     rot_err = float(herr[~trans].max()) if np.any(~trans) else 0.0
     gtol = 10 * max(solver.tol, 1e-12)
-    geometry_ok = bool(max(cp, pos_err) <= gtol * lc and max(cr, rot_err) <= gtol)
-    # 3. stability from a finite-difference Hessian of the Lagrangian on the null spaces
+    return {
+        "closure_position_m": cp,
+        "closure_orientation_rad": cr,
+        "position_m": pos_err,
+        "orientation_rad": rot_err,
+        "geometry_ok": bool(max(cp, pos_err) <= gtol * lc and max(cr, rot_err) <= gtol),
+    }
+
+
+def _stability(solver, res, at, a, mu) -> dict:
+    """Check 3: both verdicts from a finite-difference Hessian of the Lagrangian on the null
+    spaces of the stacked Jacobians (module docstring)."""
+    vm, free, nt, ev, x, w6 = solver.vm, solver.free, solver.nt, at.ev, at.x, at.w6
+    nc = at.cres.size
+    tarr = np.asarray(solver.task, int)
+
     def gradient(z):
         xz = x.copy()
         xz[free] = z
@@ -275,7 +351,7 @@ def check_mechanism(solver, res, *, deflection=None, method="eq28", rtol=VERIFY_
     z0 = x[free]
     n = len(free)
     z_ctl = _null_basis(a, n, solver.rank_rtol)
-    z_end = _null_basis(np.vstack([cjac[:, free], jend[tarr][:, free]]), n, solver.rank_rtol)
+    z_end = _null_basis(np.vstack([at.cjac[:, free], at.jend[tarr][:, free]]), n, solver.rank_rtol)
     cols = {}
 
     def w_times(v):
@@ -302,42 +378,15 @@ def check_mechanism(solver, res, *, deflection=None, method="eq28", rtol=VERIFY_
             hrel = max(hrel, float(np.abs(given.eigenvalues - fresh).max() / escale))
         elif given.eigenvalues.shape != fresh.shape:
             hrel = np.inf
-        top = fresh.max() if fresh.size else -np.inf
-        agree = agree and bool(given.stable == stable or abs(top) <= 10 * thr)
-    stability_ok = bool(agree and hrel <= VERIFY_HESSIAN)
-    # 4. K_C along its softest direction against re-solved equilibria
-    checked, kerr = False, float("nan")
-    if stiffness:
-        try:
-            kc = solver.stiffness(res, method).task_stiffness
-        except SingularStiffness:
-            kc = None
-        if kc is not None:
-            checked, kerr = True, _stiffness_error(solver, res, kc, rtol)
-    stiffness_ok = bool(not checked or kerr <= rtol)
-    return MechanismCheck(
-        statics_relative=statics,
-        statics_ok=statics_ok,
-        closure_multipliers=mu.copy(),
-        task_reaction=hm.T @ lam,
-        multipliers_relative=mult_rel,
-        reaction_relative=react_rel,
-        closure_position_m=cp,
-        closure_orientation_rad=cr,
-        position_m=pos_err,
-        orientation_rad=rot_err,
-        geometry_ok=geometry_ok,
-        stable=st_ctl,
-        stable_end_held=st_end,
-        eigenvalues=e_ctl,
-        eigenvalues_end_held=e_end,
-        hessian_relative=float(hrel),
-        stability_ok=stability_ok,
-        stiffness_checked=checked,
-        stiffness_relative_error=kerr,
-        stiffness_ok=stiffness_ok,
-        ok=bool(statics_ok and geometry_ok and stability_ok and stiffness_ok),
-    )
+        agree = agree and verdict_agrees(given, stable, fresh, thr)
+    return {
+        "stable": st_ctl,
+        "stable_end_held": st_end,
+        "eigenvalues": e_ctl,
+        "eigenvalues_end_held": e_end,
+        "hessian_relative": float(hrel),
+        "stability_ok": bool(agree and hrel <= VERIFY_HESSIAN),
+    }
 
 
 def held_deflection(solver, res, dt: np.ndarray) -> np.ndarray:
@@ -351,39 +400,26 @@ def held_deflection(solver, res, dt: np.ndarray) -> np.ndarray:
 
 
 def _stiffness_error(solver, res, kc, rtol) -> float:
+    """Check 4: K_C along its softest direction against central differences of the task wrench
+    of re-solved equilibria (every task component held, plain Newton from ``res``)."""
     from vjm_pin.solver.mechanism import MechanismSolver
 
     task = list(solver.task)
     lc = solver.length_scale
-    dsc = np.where(np.array(task) < 3, 1.0, 1.0 / lc)  # rotations in units of L_c
-    ks = dsc[:, None] * kc * dsc[None, :]
-    evals, vec = np.linalg.eigh(0.5 * (ks + ks.T))
-    u = vec[:, int(np.argmin(np.abs(evals)))] * dsc
-    u /= np.linalg.norm(u / dsc)
+    u = softest_direction(kc, task, lc)
     plain = MechanismSolver(
         solver.vm, solver.loads.loads, solver.loads.gravity, tol=solver.tol, max_iter=solver.max_iter,
         restarts=0, follow_stable=False, rank_rtol=solver.rank_rtol,
     )
-    ku = kc @ u
-    best = np.inf
-    for h in (1e-6 * lc, 1e-8 * lc, 1e-10 * lc):
-        fs = []
-        for sgn in (1.0, -1.0):
-            dt = np.zeros(6)
-            dt[task] = sgn * h * u
-            try:
-                rr = plain.solve(deflection=held_deflection(solver, res, dt), held=tuple(task), x0=res.x)
-            except NoEquilibrium:
-                break
-            fs.append(rr.wrench[task])
-        if len(fs) < 2:
-            continue
-        fd = (fs[0] - fs[1]) / (2 * h)
-        den = max(np.linalg.norm(ku), np.linalg.norm(fd), 1e-12 * np.abs(kc).max(), 1e-300)
-        best = min(best, float(np.linalg.norm(ku - fd) / den))
-        if best <= rtol:
-            break
-    return best
+
+    def task_wrench(dt):
+        try:
+            rr = plain.solve(deflection=held_deflection(solver, res, dt), held=tuple(task), x0=res.x)
+        except NoEquilibrium:
+            return None
+        return rr.wrench[task]
+
+    return stiffness_fd_error(kc, u, task, lc, task_wrench, rtol)
 
 
 __all__ = ["MechanismCheck", "check_mechanism", "held_deflection"]

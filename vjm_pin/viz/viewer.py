@@ -146,6 +146,7 @@ import numpy as np
 import pinocchio as pin
 
 from vjm_pin.exceptions import FrameNotFound, InputError, JointNotFound, RoleError
+from vjm_pin.model.task import task_vector
 
 __all__ = [
     "CRITICAL_COLOR",
@@ -904,15 +905,11 @@ class Animation:
 
     @staticmethod
     def _check_forces(forces, n: int) -> list[np.ndarray] | None:
-        """Validate ``forces``: ``n`` finite 3-vectors (a 6-vector's linear part), N."""
+        """Validate ``forces``: ``n`` finite 3-vectors (a 6-vector's linear part), N
+        (:func:`vjm_pin.model.task.task_vector`, the one "3 or 6 numbers" check)."""
         if forces is None:
             return None
-        fl = []
-        for k, f in enumerate(forces):
-            f = np.asarray(f, dtype=float).ravel()
-            if f.size not in (3, 6) or not np.all(np.isfinite(f)):
-                raise InputError(f"forces[{k}] must be a finite 3-vector (N), got shape {f.shape}")
-            fl.append(f[:3].copy())
+        fl = [task_vector(f, name=f"forces[{k}]", unit="N")[:3] for k, f in enumerate(forces)]
         if len(fl) != n:
             raise InputError(f"forces has {len(fl)} entries, expected {n} (one per frame)")
         return fl
