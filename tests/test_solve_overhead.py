@@ -107,3 +107,69 @@ def test_frozen_shortcut_equals_the_constructor_and_keeps_its_errors():
         eq._frozen(StabilityResult, stable=True, eigenvalues=ev, null_dim=2, bogus=1)
     with pytest.raises(TypeError):
         eq._frozen(StabilityResult, stable=True)
+
+
+def test_solver_objects_built_without_init_equal_the_constructors(solver):
+    """The result, its verdict and the kept kinematic state of a warm solve (built by ``_built``,
+    without ``__init__``) hold exactly the constructors' fields, in order, and stay frozen."""
+    from vjm_pin.kinematics.chain import KinematicState
+    from vjm_pin.solver.stability import StabilityResult
+
+    first = solver.solve(np.array([-1e-4, 0, 0]))
+    r = solver.solve(np.array([-1.1e-4, 0, 0]), x0=first.x, wrench0=first.wrench)
+    assert r.path == "newton"  # the fast lane
+    st = solver.kin._last[1]
+    for obj, cls in ((r, eq.EquilibriumResult), (r.stability, StabilityResult), (st, KinematicState)):
+        names = [f.name for f in dataclasses.fields(cls)]
+        assert type(obj) is cls and list(vars(obj)) == names
+        plain = cls(**vars(obj))
+        assert all(getattr(plain, k) is getattr(obj, k) for k in names)
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            setattr(obj, names[0], None)
+    assert r.checks == {} and r.checks is not first.checks
+
+
+def test_kept_blocks_are_built_when_asked_and_equal_fresh_ones(solver):
+    """A fast-path equilibrium keeps its Blocks lazily: built by the first evaluate_blocks at that
+    point, then the same object, equal to an evaluation from scratch."""
+    from vjm_pin.kinematics.chain import Kinematics
+    from vjm_pin.solver.blocks import Blocks, evaluate_blocks
+
+    r = solver.solve(np.array([-1.2e-4, 0, 0]))
+    kept = solver.kin._blocks_last
+    assert not isinstance(kept[2], Blocks) and callable(kept[2].build)
+    b = evaluate_blocks(solver.vm, solver.kin, r.x, r.wrench)
+    assert isinstance(b, Blocks) and evaluate_blocks(solver.vm, solver.kin, r.x, r.wrench) is b
+    fresh = evaluate_blocks(solver.vm, Kinematics(solver.vm.model, solver.vm.frame_id), r.x, r.wrench)
+    for attr in ("J_theta", "J_q", "H_tt", "H_tq", "H_qt", "H_qq", "K_theta"):
+        a, c = getattr(b, attr), getattr(fresh, attr)
+        assert a.shape == c.shape
+        if c.size:
+            assert np.abs(a - c).max() <= 1e-12 * np.abs(c).max()
+
+
+def test_warm_start_rank_check_reads_the_jacobian_at_the_start(solver):
+    """The perturbed-start test of a warm start reads the kept J of the last equilibrium: it is J at
+    that configuration (task rows, free columns), as a fresh evaluation gives it."""
+    from vjm_pin.kinematics.chain import Kinematics
+
+    r = solver.solve(np.array([-1.3e-4, 0, 0]))
+    fact = solver._fast_fact
+    assert fact[0] == r.x.tobytes()
+    fresh = Kinematics(solver.vm.model, solver.vm.frame_id).evaluate(r.x, hessian=False)
+    ref = fresh.jacobian[solver.task][:, solver.free]
+    assert fact[3].shape == ref.shape and np.abs(fact[3] - ref).max() <= 1e-14 * np.abs(ref).max()
+
+
+@pytest.mark.parametrize("values", [[1.0, 2.0], [np.nan, 1.0], [np.inf, 1.0], [-np.inf, np.inf], [1e308, 1e308],
+                                    [1e308, np.nan], [], [0.0]])
+def test_all_finite_is_isfinite_all(values):
+    a = np.array(values, float)
+    assert eq._all_finite(a) == bool(np.isfinite(a).all())
+
+
+def test_task_wrench_shortcut_reads_as_the_general_path(solver):
+    w = np.array([3.0, -2.0, 1.0, 0.0, 0.0, 0.0])
+    got = solver._task_wrench(w)
+    ref = solver._task_wrench(list(w))  # (a list: the general path)
+    assert got.tobytes() == ref.tobytes() and not np.shares_memory(got, w)

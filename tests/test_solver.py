@@ -232,3 +232,90 @@ def test_fast_fail_makes_one_attempt():
         EquilibriumSolver(load_vjm(paper_model_urdf("a", "s")), max_iter=1).solve(
             [-2.5, 0, 0], fast_fail=True
         )
+
+
+# --------------------------------------------------------------------------- safeguarded path
+@pytest.mark.parametrize("e0,slope,c", [(1.0, -2.0, 5.0), (1.0, -2.0, 0.5), (1.0, -1e-6, 100.0), (0.0, -3.0, 1.0)])
+def test_backtrack_is_the_quadratic_minimiser_within_its_bounds(e0, slope, c):
+    """The safeguarded line search's next trial after a rejected ``alpha``: the minimiser of the
+    quadratic through E(0), E'(0) and E(alpha), kept in [0.1, 0.5]·alpha."""
+    from vjm_pin.solver.equilibrium import _backtrack
+
+    for alpha in (1.0, 0.25):
+        en = e0 + slope * alpha + c * alpha**2  # the energy along the step is this quadratic
+        got = _backtrack(alpha, e0, slope, en)
+        want = -slope / (2 * c)
+        assert 0.1 * alpha <= got <= 0.5 * alpha
+        if 0.1 * alpha <= want <= 0.5 * alpha:
+            assert got == pytest.approx(want, rel=1e-12)
+        else:
+            assert got == (0.1 * alpha if want < 0.1 * alpha else 0.5 * alpha)
+
+
+def test_backtrack_halves_without_a_model():
+    from vjm_pin.solver.equilibrium import _backtrack
+
+    assert _backtrack(0.5, 1.0, -1.0, None) == 0.25  # restoration failed: no energy
+    assert _backtrack(0.5, 1.0, 0.0, 2.0) == 0.25  # not a descent direction
+    assert _backtrack(0.5, 1.0, -1.0, 0.4) == 0.25  # the quadratic has no minimum (c <= 0)
+
+
+def test_lowest_energy_with_ties_to_the_first_found():
+    from dataclasses import replace
+
+    from vjm_pin.model.registry import resolve_model
+
+    solver = EquilibriumSolver(resolve_model("paper-c-s"))
+    r = solver.solve([-1e-5, 0, 0])
+    found = [replace(r, energy=e, path=str(i)) for i, e in enumerate((1.0, 1.0 - 1e-13, 0.5))]
+    assert solver._lowest(found).path == "2"
+    assert solver._lowest(found[:2]).path == "0"  # equal to rounding: the first found
+    assert solver._lowest([replace(r, energy=1.0, path="a"), replace(r, energy=0.9, path="b")]).path == "b"
+
+
+def _crossing(vm, direction, span, n):
+    """(solver, start result, deflection) of the warm-started solve along ``direction`` that leaves
+    the straight column by an escape (the buckling crossing)."""
+    s = EquilibriumSolver(vm)
+    prev = None
+    for t in np.linspace(span / n, span, n):
+        r = s.solve(t * direction, x0=None if prev is None else prev.x, wrench0=None if prev is None else prev.wrench)
+        if "escape" in r.path and prev is not None:
+            return s, prev, t * direction
+        prev = r
+    raise AssertionError("no escape along the path")
+
+
+def test_crossing_interpolated_line_search_finds_the_same_equilibria_with_fewer_restorations(monkeypatch):
+    """The buckling crossing of Model C (an escape from the straight unstable column along both signs
+    of its unstable mode): the interpolating line search reaches the same buckled equilibrium (up to
+    the mirror image: the two signs tie in energy) as halving, with fewer restorations."""
+    from vjm_pin.model.registry import resolve_model
+    from vjm_pin.solver import equilibrium as eqmod
+
+    vm = resolve_model("paper-c-s")
+    direction = np.array([-1.0, 0, 0, 0, 0, 0])
+    _, prev, d = _crossing(vm, direction, 2e-4, 8)
+    calls = {"n": 0}
+    restore = EquilibriumSolver._restore
+
+    def counted(self, *a, **k):
+        calls["n"] += 1
+        return restore(self, *a, **k)
+
+    monkeypatch.setattr(EquilibriumSolver, "_restore", counted)
+    out = {}
+    for shortcuts in (False, True):
+        monkeypatch.setattr(eqmod, "_safeguard_shortcuts", shortcuts)
+        calls["n"] = 0
+        r = EquilibriumSolver(vm).solve(d, x0=prev.x, wrench0=prev.wrench)
+        out[shortcuts] = (r, calls["n"])
+    (a, na), (b, nb) = out[False], out[True]
+    assert a.converged and b.converged and a.stable and b.stable
+    assert "escape" in a.path and "escape" in b.path
+    assert nb < na
+    scale = np.abs(a.x).max()
+    assert np.minimum(np.abs(a.x - b.x), np.abs(a.x + b.x)).max() <= 1e-9 * scale  # same or mirrored
+    assert abs(a.wrench @ direction - b.wrench @ direction) <= 1e-9 * abs(a.wrench @ direction)
+    assert abs(a.energy - b.energy) <= 1e-9 * a.energy
+    assert np.abs(a.stability.eigenvalues - b.stability.eigenvalues).max() <= 1e-9 * np.abs(a.stability.eigenvalues).max()

@@ -110,6 +110,7 @@ def loaded_stiffness(vm: VjmModel, eq: EquilibriumResult, method: str = "eq30", 
     return stiffness_from_blocks(blocks_at(vm, eq.x, eq.wrench, kin), vm.task, method)
 
 
+@one_blas_thread  # one BLAS thread inside the library (vjm_pin.solver.threads)
 def unloaded_stiffness(vm: VjmModel, method: str = "eq30", kin: Kinematics | None = None) -> StiffnessResult:
     """Stiffness at the unloaded reference configuration (H = 0: Table 1 of the paper)."""
     from vjm_pin.solver.stiffness import stiffness_from_blocks

@@ -109,7 +109,11 @@ def evaluate_blocks(
     key = x.tobytes() + wrench.tobytes()
     last = getattr(kin, "_blocks_last", None)
     if last is not None and last[0] is vm and last[1] == key:
-        return last[2]
+        b = last[2]
+        if type(b) is _Lazy:  # kept lazily (remember_lazy): built now, once
+            b = b.build()
+            kin._blocks_last = (vm, key, b)
+        return b
     nt = len(vm.theta_idx)
     free = np.concatenate([vm.theta_idx, vm.q_idx])
     task = list(vm.task)
@@ -147,3 +151,23 @@ def remember_blocks(vm: VjmModel, kin: Kinematics, x: np.ndarray, wrench: np.nda
         kin._blocks_last = (vm, np.asarray(x, float).tobytes() + np.asarray(wrench, float).tobytes(), b)
     except AttributeError:  # a kinematics object with __slots__: no cache
         pass
+
+
+def remember_lazy(vm: VjmModel, kin: Kinematics, key: bytes, build) -> None:
+    """:func:`remember_blocks` for blocks not built yet: ``key`` is ``x.tobytes() + wrench.tobytes()``
+    and ``build()`` returns the :class:`Blocks` (called by :func:`evaluate_blocks` when they are
+    first asked for at that key; a solve whose blocks nobody asks for never builds them)."""
+    try:
+        kin._blocks_last = (vm, key, _Lazy(build))
+    except AttributeError:  # a kinematics object with __slots__: no cache
+        pass
+
+
+class _Lazy:
+    """Blocks not built yet (:func:`remember_lazy`): a marker type, so blocks of any other class kept
+    on the same kinematics (the benchmark's frozen release solver) are returned as they are."""
+
+    __slots__ = ("build",)
+
+    def __init__(self, build):
+        self.build = build

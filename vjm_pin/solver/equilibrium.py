@@ -98,7 +98,13 @@ from vjm_pin.kinematics.screw import psi_hessian_screw
 from vjm_pin.model.format import VjmModel
 from vjm_pin.model.task import task_vector
 from vjm_pin.solver import kernel as _kernel  # numpy only at import; numba when first needed
-from vjm_pin.solver.blocks import Blocks, evaluate_blocks, full_wrench, remember_blocks
+from vjm_pin.solver.blocks import (
+    Blocks,
+    evaluate_blocks,
+    full_wrench,
+    remember_blocks,
+    remember_lazy,
+)
 from vjm_pin.solver.lapack import lapack as _lapack
 from vjm_pin.solver.lapack import solve_triangular as _solve_triangular
 from vjm_pin.solver.stability import (
@@ -150,6 +156,9 @@ VERIFY_RTOL = 1e-3
 VERIFY_STATICS = 1e-8
 #: Names of the six task components, in order.
 COMPONENTS = ("x", "y", "z", "rx", "ry", "rz")
+#: Private switch (False: the safeguarded line search halves the step, as before issue 14's third
+#: round, instead of interpolating (:func:`_backtrack`); for the tests and the benchmark).
+_safeguard_shortcuts = True
 #: Private switch of the fused Newton kernel (:mod:`vjm_pin.solver.kernel`): False runs the
 #: unfused local iteration (``_fast_factor`` / ``_fast_step``; for the tests and the benchmark).
 _fused_enabled = True
@@ -270,9 +279,48 @@ def _frozen(cls, **fields):
     return obj
 
 
+def _built(cls, d: dict):
+    """The frozen dataclass ``cls`` (no ``__post_init__``, no slots) whose fields are exactly the
+    dict ``d`` (every init field, in field order), without ``__init__`` and without the checks of
+    :func:`_frozen`: for the solver's own objects built at every solve, whose callers name every
+    field (``tests/test_solve_overhead.py`` compares them with the constructors)."""
+    obj = object.__new__(cls)
+    obj.__dict__.update(d)
+    return obj
+
+
 def _new_result(**fields) -> EquilibriumResult:
     """``EquilibriumResult(**fields)`` (see :func:`_frozen`)."""
     return _frozen(EquilibriumResult, **fields)
+
+
+def _blocks_builder(jac, hz, nt, kt, st):
+    """A function returning the :class:`Blocks` of a fast-path equilibrium (J task rows / free
+    columns, Hessian of Ψ in (θ, q) order) as :func:`evaluate_blocks` lays them out."""
+
+    def build():
+        return Blocks(jac[:, :nt], jac[:, nt:], hz[:nt, :nt], hz[:nt, nt:], hz[nt:, :nt], hz[nt:, nt:], kt, st)
+
+    return build
+
+
+def _backtrack(alpha: float, e0: float, slope: float, en: float | None) -> float:
+    """The next trial step of the safeguarded line search after ``alpha`` was rejected: the
+    minimiser of the quadratic through the energy ``e0`` and ``slope`` at 0 and ``en`` at ``alpha``,
+    kept in [0.1, 0.5]·alpha (Nocedal & Wright §3.5); halving when ``en`` is unknown (restoration
+    failed) or the model has no minimum."""
+    if en is None or not slope < 0.0:
+        return 0.5 * alpha
+    c = en - e0 - slope * alpha  # curvature term × alpha²
+    if not c > 0.0:
+        return 0.5 * alpha
+    return min(max(-slope * alpha * alpha / (2.0 * c), 0.1 * alpha), 0.5 * alpha)
+
+
+def _all_finite(a: np.ndarray) -> bool:
+    """``np.isfinite(a).all()`` for a float array, by its sum first (one call: a finite sum has
+    no NaN or inf in it; a sum that overflowed is checked element by element)."""
+    return math.isfinite(a.sum()) or bool(np.isfinite(a).all())
 
 
 def _singular_values(a: np.ndarray) -> np.ndarray:
@@ -349,6 +397,7 @@ class EquilibriumSolver:
             when the converged equilibrium is unstable (eq. 23).
     """
 
+    @one_blas_thread  # its setup inverts K_θ and the metric: order 6n at k-subdivided links
     def __init__(
         self,
         vm: VjmModel,
@@ -411,6 +460,9 @@ class EquilibriumSolver:
         self._off_task = np.array([i for i in range(6) if i not in self.task], int)
         self._r_unrotated = displace(self.p0, self.r0, np.zeros(6))[1]  # target rotation of a zero rotation part
         self._ip = np.array(self._rows_p, int)
+        self._zero3 = np.zeros(3)  # erot of a task without rotations (the kernels only read it)
+        self._task_idx = np.array(self.task, int)
+        self._partial_task_rotation = bool(self._partial_rotation(self.task))  # see _rotation_targets
         self._ir = np.array(self._rows_r, int)
         self._triu = np.triu(np.ones((len(self.task),) * 2))
         t = self.task
@@ -615,11 +667,14 @@ class EquilibriumSolver:
         flush = bool(chain._flush_enabled)
         lwa = pin.LOCAL_WORLD_ALIGNED
         nv = model.nv
-        zero3 = np.zeros(3)
+        zero3 = self._zero3  # (read only)
         dummy = _KERNEL_DUMMY
         kkt_prev = np.inf
         polish = 0
-        x = flush_tiny(np.array(x, dtype=float))
+        x = np.array(x, dtype=float)
+        fact = self._fast_fact
+        if fact is None or fact[0] != x.tobytes():  # (the last equilibrium is flushed already)
+            flush_tiny(x)
         for it in range(self._fast_max_iter + 1 + POLISH_ITERATIONS):
             key = x.tobytes()
             fact = self._fast_fact
@@ -627,9 +682,7 @@ class EquilibriumSolver:
                 # a warm start from the equilibrium this solver just found (the target does not
                 # enter the factorisation; a factorisation by the other implementation is redone)
                 st = fact[2]
-                f6 = np.zeros(6)
-                f6[self._task_rows] = fact[6]
-                kf = tuple(fact[3:10]) + (f6,)
+                kf = fact[3:11]  # (jac, qf, rr, f, r, tau, hz, f6), read only
                 j6, pos, rotm, refactor = dummy[8], st.position, st.rotation, False
             else:
                 if data is None:
@@ -654,22 +707,23 @@ class EquilibriumSolver:
             if status == kernel.RANK_FAIL:
                 return None
             if status == kernel.CONVERGED:
-                stab = _frozen(StabilityResult, stable=bool(ev.size == 0 or ev.max() < -thr), eigenvalues=ev,
-                               null_dim=n - m, tolerance=thr)
-                if self.follow_stable and not stab.stable:
+                stable = bool(ev.size == 0 or ev[-1] < -thr)  # (ascending)
+                if self.follow_stable and not stable:
                     self._fast_its = it
                     return None
+                stab = _built(StabilityResult, {"stable": stable, "eigenvalues": ev, "null_dim": n - m, "tolerance": thr})
                 jac, qf, rr, f, r, tau, hz, f6 = kf
                 if st is None:
-                    st = _frozen(KinematicState, position=pos.copy(), rotation=mo.rotation.copy(), jacobian=j6, hessian=None)
+                    st = _built(KinematicState, {"position": pos.copy(), "rotation": mo.rotation.copy(), "jacobian": j6,
+                                                 "hessian": None})
                     kin._last = (key, st)  # kin.evaluate(x, hessian=False) at this point: no Pinocchio call
                 res = {"position": float(ep), "orientation": float(er), "statics": float(rs)}
-                self._fast_cache = (key + f6.tobytes() + pt.tobytes() + rt.tobytes(), res, stab)
-                self._fast_fact = (key, kin, st, jac, qf, rr, f, r, tau, hz, step_fn)
-                nt, kt = self.nt, self.vm.K_theta
-                blocks = _frozen(Blocks, J_theta=jac[:, :nt], J_q=jac[:, nt:], H_tt=hz[:nt, :nt], H_tq=hz[:nt, nt:],
-                                 H_qt=hz[nt:, :nt], H_qq=hz[nt:, nt:], K_theta=kt, state=st)
-                remember_blocks(self.vm, kin, x, f6, blocks)
+                wkey = key + f6.tobytes()
+                self._fast_cache = (wkey + pt.tobytes() + rt.tobytes(), res, stab, x, f, f6, p_t, r_t)
+                self._fast_fact = (key, kin, st, jac, qf, rr, f, r, tau, hz, f6, step_fn)
+                # the Blocks at this equilibrium (as evaluate_blocks builds them), built when first
+                # asked for (a curve point's stiffness): kept lazily
+                remember_lazy(self.vm, kin, wkey, _blocks_builder(jac, hz, self.nt, self.vm.K_theta, st))
                 return x, f, it, st
             self._fast_its = it
             if it and not kkt < 0.5 * kkt_prev or it - polish >= self._fast_max_iter:
@@ -835,7 +889,10 @@ class EquilibriumSolver:
         stable branch is followed the reduced Hessian is shifted to be positive definite, so
         the step descends the energy, and a step is accepted only if the energy does not
         increase (Armijo), or, for an unmodified Newton step, if the residual of eq. (5)
-        falls. With ``follow_stable=False`` full Newton steps are taken (unstable branches).
+        falls; a rejected step is shortened to the minimiser of the quadratic through the energy
+        and its slope at the iterate and the energy at the rejected trial, kept in [0.1, 0.5] of
+        it (:func:`_backtrack`; each trial costs a restoration). With ``follow_stable=False``
+        full Newton steps are taken (unstable branches).
         The plain local iteration (:meth:`_fast_newton`) is tried first.
         """
         self._fast_its = 0
@@ -843,7 +900,11 @@ class EquilibriumSolver:
         if fast is not None:
             xf, ff, itf, stf = fast
             return xf, ff, itf, True, stf
-        spent = self._fast_its
+        return self._newton_rest(x, f, p_t, r_t, max_iter, self._fast_its)
+
+    def _newton_rest(self, x, f, p_t, r_t, max_iter, spent):
+        """:meth:`_newton` once its plain local iteration from ``x`` gave way after ``spent``
+        iterations: the safeguarded iteration, then the local one from its equilibrium."""
         x, f, it, ok, state = self._newton_safeguarded(x, f, p_t, r_t, max_iter)
         if ok:  # polish (and cache the verdict) by the local iteration from the converged point
             fast = self._fast_newton(x, p_t, r_t)
@@ -909,6 +970,7 @@ class EquilibriumSolver:
                 xn[self.free] += alpha * dz
                 flush_tiny(xn)
                 xn, sn, feas = self._restore(xn, None, p_t, r_t)
+                en_ = None
                 if feas:
                     en_ = self.energy(xn)
                     if not self.follow_stable:
@@ -924,7 +986,7 @@ class EquilibriumSolver:
                         accepted = self._kkt_norm(e_n, r_n) < 0.5 * kkt0
                 if accepted:
                     break
-                alpha *= 0.5
+                alpha = _backtrack(alpha, e0, slope, en_) if _safeguard_shortcuts else 0.5 * alpha
             if not accepted:
                 return x, f, it + 1, False, state
             x, state = xn, sn
@@ -936,29 +998,38 @@ class EquilibriumSolver:
         fixed-point scheme of eq. 10). Returns (x, state, converged); ``state`` carries no
         Hessian (callers evaluate it when they need it)."""
         tol_p = self.tol * self.length_scale
+        kin, task, free, minv, escale = self.kin, self._task_idx, self.free, self.Minv, self._err_scale
+        lim, max_step, vscale = 0.01 * self.tol, self.max_step, self.var_scale
+        p_t = np.asarray(p_t)
+        # the pose error's task rows (pose_error(...)[task]); log3 only when rotations are held
+        rot, rows = self._ir.size > 0, self._task_rows
+        solve, isfinite = np.linalg.solve, np.isfinite
         for _ in range(max_iter + 1):
             if state is None:
-                state = self.kin.evaluate(x, hessian=False)
-            e = pose_error(p_t, r_t, state.position, state.rotation)[self.task]
-            scaled = np.abs(e / self._err_scale).max() if e.size else 0.0
-            if scaled <= 0.01 * self.tol:
+                state = kin.evaluate(x, hessian=False)
+            if rot:
+                e = np.concatenate([p_t - state.position, pin.log3(np.asarray(r_t) @ state.rotation.T)])[task]
+            else:
+                e = (p_t - state.position)[rows]
+            scaled = np.abs(e / escale).max() if e.size else 0.0
+            if scaled <= lim:
                 return x, state, True
-            jz = state.jacobian[self.task][:, self.free]
-            a = jz @ self.Minv @ jz.T
+            jz = state.jacobian[task][:, free]
+            a = jz @ minv @ jz.T
             try:
-                delta = self.Minv @ jz.T @ np.linalg.solve(a, e)
+                delta = minv @ jz.T @ solve(a, e)
             except np.linalg.LinAlgError:
                 return x, state, False
-            if not np.all(np.isfinite(delta)):
+            if not isfinite(delta).all():
                 return x, state, False
-            big = np.abs(delta / self.var_scale).max()
-            if big > self.max_step:  # damped (far from the constraint, e.g. a straight chain)
-                delta *= self.max_step / big
+            big = np.abs(delta / vscale).max()
+            if big > max_step:  # damped (far from the constraint, e.g. a straight chain)
+                delta *= max_step / big
             x = x.copy()
-            x[self.free] += delta
+            x[free] += delta
             flush_tiny(x)
             state = None
-        state = self.kin.evaluate(x, hessian=False)
+        state = kin.evaluate(x, hessian=False)
         e = pose_error(p_t, r_t, state.position, state.rotation)[self.task]
         return x, state, bool(np.abs(e).max() <= max(tol_p, self.tol))
 
@@ -996,14 +1067,19 @@ class EquilibriumSolver:
     # ----------------------------------------------------------------- public
     def _result(self, x, f, iters, ok, state, p_t, r_t, path, with_stability=True) -> EquilibriumResult:
         vm = self.vm
-        w6 = np.zeros(6)
-        w6[self._task_rows] = f  # full_wrench(vm, f)
         fc = self._fast_cache
-        if fc is not None and fc[0] == x.tobytes() + w6.tobytes() + p_t.tobytes() + r_t.tobytes():  # by _fast_newton
+        if fc is not None and len(fc) > 3 and fc[3] is x and fc[4] is f and fc[6] is p_t and fc[7] is r_t:
+            # straight from the fused iteration's convergence (its own arrays): its wrench (6,)
+            w6 = fc[5].copy()  # full_wrench(vm, f)
             res, stab = dict(fc[1]), fc[2]
         else:
-            _, _, _, _, res, _ = self._residuals(x, f, state, p_t, r_t)
-            stab = None
+            w6 = np.zeros(6)
+            w6[self._task_rows] = f  # full_wrench(vm, f)
+            if fc is not None and fc[0] == x.tobytes() + w6.tobytes() + p_t.tobytes() + r_t.tobytes():  # by _fast_newton
+                res, stab = dict(fc[1]), fc[2]
+            else:
+                _, _, _, _, res, _ = self._residuals(x, f, state, p_t, r_t)
+                stab = None
         if not (with_stability and ok):
             stab = None
         elif stab is None:
@@ -1018,25 +1094,26 @@ class EquilibriumSolver:
         total end wrench ``w6``, shared by the all-held and the mixed-control solves."""
         vm = self.vm
         pos, rot = state.position, state.rotation
-        return _new_result(
-            x=x.copy(),
-            q=x[vm.q_idx],  # (index arrays: already copies)
-            theta=x[vm.theta_idx],
-            wrench=w6,
-            deflection=np.concatenate([pos - self.p0, pin.log3(rot @ self.r0.T)]),  # kinematics.chain.deflection
-            position=pos.copy(),
-            rotation=rot.copy(),
-            converged=bool(ok),
-            iterations=int(iters),
-            residuals=res,
-            energy=self.energy(x),
-            path=path,
-            stability=stab,
-            held=held,
-            stability_end_held=end,
-            warnings=warnings,
-            checks={},
-        )
+        d = x[vm.theta_idx] - vm.theta0  # energy(x)
+        return _built(EquilibriumResult, {
+            "x": x.copy(),
+            "q": x[vm.q_idx],  # (index arrays: already copies)
+            "theta": x[vm.theta_idx],
+            "wrench": w6,
+            "deflection": np.concatenate([pos - self.p0, pin.log3(rot @ self.r0.T)]),  # kinematics.chain.deflection
+            "position": pos.copy(),
+            "rotation": rot.copy(),
+            "converged": bool(ok),
+            "iterations": int(iters),
+            "residuals": res,
+            "energy": 0.5 * float(d @ vm.K_theta @ d),
+            "path": path,
+            "stability": stab,
+            "held": held,
+            "stability_end_held": end,
+            "warnings": warnings,
+            "checks": {},
+        })
 
     def _solve_local(self, deflection, x0: np.ndarray) -> EquilibriumResult | None:
         """The plain local Newton iteration alone (:meth:`_fast_newton`) from ``x0``: its
@@ -1072,6 +1149,10 @@ class EquilibriumSolver:
         m = len(self.task)
         if wrench0 is None:
             return np.zeros(m)
+        if type(wrench0) is np.ndarray and wrench0.shape == (6,) and wrench0.dtype == np.float64:
+            w = wrench0.take(self._task_idx)  # (a copy) the common case: a result's wrench
+            if _all_finite(w):
+                return w
         w = np.asarray(wrench0, dtype=float).ravel()
         if w.size == 6:
             w = w[self.task]
@@ -1084,7 +1165,7 @@ class EquilibriumSolver:
     def _start(self, x0) -> np.ndarray:
         vm = self.vm
         x = vm.reference.copy() if x0 is None else np.asarray(x0, float).ravel().copy()
-        if x.shape != (vm.model.nq,) or not np.isfinite(x).all():
+        if x.shape != (vm.model.nq,) or not _all_finite(x):
             raise InputError(f"x0 must be a finite configuration of size {vm.model.nq}")
         return x
 
@@ -1094,7 +1175,7 @@ class EquilibriumSolver:
         if type(v) is np.ndarray and v.shape == (6,) and v.dtype == np.float64:
             # the common case (a curve's solves), as task_vector reads it: a copy, finite
             a = v.copy()
-            if np.isfinite(a).all():
+            if _all_finite(a):
                 return a
         return task_vector(v, self.task, name, unit, task_sized=True, outside_task="keep")
 
@@ -1127,6 +1208,13 @@ class EquilibriumSolver:
         hrot = [c for c in held if c >= 3]
         return hrot if 0 < len(hrot) < 3 else []
 
+    def _target_pose(self, d):
+        """The end pose ``displace(p0, r0, d)`` of the (6,) deflection ``d`` (without ``exp3`` for a
+        zero rotation part: the same numbers)."""
+        if d[3:].tobytes() == _ZERO3:
+            return self.p0 + d[:3], self._r_unrotated.copy()
+        return displace(self.p0, self.r0, d)
+
     def _rotation_targets(self, d, held, run, x0, f0, raise_on_failure: bool = True) -> EquilibriumResult:
         """Meet the held rotation components of the deflection ``d`` in the reported
         coordinates ``log3(R R0ᵀ)`` when only some rotations are held.
@@ -1143,10 +1231,7 @@ class EquilibriumSolver:
         (:class:`NoEquilibrium`, or ``converged=False`` without ``raise_on_failure``), never a
         result with a warning only."""
         hrot = self._partial_rotation(held)
-        if d[3:].tobytes() == _ZERO3:  # displace(p0, r0, d) without exp3 (the same numbers)
-            p, r = self.p0 + d[:3], self._r_unrotated.copy()
-        else:
-            p, r = displace(self.p0, self.r0, d)
+        p, r = self._target_pose(d)
         res = run(p, r, x0, f0)
         if not hrot:
             return res
@@ -1200,7 +1285,9 @@ class EquilibriumSolver:
         A stable equilibrium is returned whenever one is found: when the iteration converges
         to an unstable one (eq. 23 fails) the configuration is pushed along each unstable
         eigenvector of the matrix of eq. (23), both signs, and re-solved; the stable one of
-        lowest energy is kept (path ``+escape(k)``); then seeded random restarts. When only
+        lowest energy is kept (path ``+escape(k)``; energies within 10·tol of each other, e.g. the
+        two mirror images of a symmetric buckled column, are a tie won by the first found, so the
+        branch does not depend on rounding); then seeded random restarts. When only
         unstable equilibria are found, the one of lowest energy is returned with
         ``stable=False`` and a note in ``warnings``.
 
@@ -1233,8 +1320,11 @@ class EquilibriumSolver:
             p_t, r_t = _as_target(self.vm, self.kin, self.p0, self.r0, deflection, target)
             return run(p_t, r_t, x_start, f_start)
         d = self._vector6(deflection, "deflection", "m, rad")
-        if self._off_task.size and np.any(d[self._off_task]):
+        if self._off_task.size and d.take(self._off_task).any():
             task_vector(d, self.vm.task, "deflection", "m, rad")  # its error: components outside the task (as _as_target)
+        if not self._partial_task_rotation:  # one target pose (what _rotation_targets does then)
+            p_t, r_t = self._target_pose(d)
+            return self._solve_target(p_t, r_t, x_start, f_start, raise_on_failure, fast_fail)
         return self._rotation_targets(d, self.task, run, x_start, f_start, raise_on_failure)
 
     def _escape(self, res, p_t, r_t, attempt_once) -> list[EquilibriumResult]:
@@ -1265,15 +1355,28 @@ class EquilibriumSolver:
                         break
         return found
 
+    def _lowest(self, found: list[EquilibriumResult]) -> EquilibriumResult:
+        """The equilibrium of lowest energy in ``found``; energies within ``10·tol`` (relative) of
+        the lowest are a tie, won by the first found. Mirror-image branches (a symmetric chain
+        buckling either way) have equal energies up to the convergence tolerance: without the tie
+        the branch would be chosen by rounding (and could differ between the compiled kernel and
+        its numpy twin)."""
+        low = min(r.energy for r in found)
+        tie = 10.0 * self.tol * max(abs(low), 1e-300)
+        return next(r for r in found if r.energy <= low + tie)
+
     def _solve_target(self, p_t, r_t, x_start, f_start, raise_on_failure, fast_fail) -> EquilibriumResult:
         """:meth:`solve` for the target pose ``(p_t, r_t)`` (every task row held)."""
         rng = []  # the restart noise generator, seeded with ``seed`` when first used
         total = 0
         name = self.method
 
-        def attempt(x_init, f_init, label, continuation=True):
+        def attempt(x_init, f_init, label, continuation=True, spent=None):
             nonlocal total
-            x, f, it, ok, st = self._iterate(x_init, f_init, p_t, r_t, self.max_iter)
+            if spent is None:
+                x, f, it, ok, st = self._iterate(x_init, f_init, p_t, r_t, self.max_iter)
+            else:  # Newton whose plain local iteration from x_init already gave way (spent iterations)
+                x, f, it, ok, st = self._newton_rest(x_init, f_init, p_t, r_t, self.max_iter, spent)
             total += it
             if not ok and (fast_fail or not continuation):
                 return self._result(x, f, total, False, st, p_t, r_t, label, with_stability=False)
@@ -1301,20 +1404,31 @@ class EquilibriumSolver:
 
         # A start where the end cannot move in some constrained direction (e.g. a straight
         # chain of rigid links) gives a singular eq. (28)/(10) matrix: perturb it first (§4.1).
-        jz0 = self.kin.evaluate(x_start, hessian=False).jacobian[self._task_rows].take(self.free, axis=1)
-        sv = _singular_values(jz0)
-        if sv.size < len(self.task) or sv.min() <= 1e-9 * max(sv.max(), 1e-300):
+        fact = self._fast_fact
+        if fact is not None and fact[1] is self.kin and fact[0] == x_start.tobytes():
+            jz0 = fact[3]  # a warm start from the last fast-path equilibrium: its J (task rows, free columns)
+        else:
+            jz0 = self.kin.evaluate(x_start, hessian=False).jacobian[self._task_rows].take(self.free, axis=1)
+        sv = _singular_values(jz0)  # descending
+        if sv.size < len(self.task) or sv[-1] <= 1e-9 * max(sv[0], 1e-300):
             x_start = self._perturb(x_start, rng)
             name += "+perturbed-start"
-        res = attempt(x_start, f_start, name)
+        if name == "newton":  # the common case first, without the attempt machinery
+            self._fast_its = 0
+            fast = self._fast_newton(x_start, p_t, r_t)
+            if fast is not None:  # stable, or any equilibrium when not follow_stable: done
+                x, f, it, st = fast
+                return self._result(x, f, it, True, st, p_t, r_t, name)
+            res = attempt(x_start, f_start, name, spent=self._fast_its)
+        else:
+            res = attempt(x_start, f_start, name)
         if res.converged and (res.stable or not self.follow_stable):
             return done(res)
         best = res
         if res.converged and not fast_fail and self.restarts > 0:
             esc = self._escape(res, p_t, r_t, lambda x: attempt(x, res.wrench[self.task], f"{name}+escape", False))
             if esc:
-                pick = min(esc, key=lambda r: r.energy)
-                return done(replace(pick, path=f"{name}+escape({len(esc)})"))
+                return done(replace(self._lowest(esc), path=f"{name}+escape({len(esc)})"))
         for k in range(1, 0 if fast_fail else self.restarts + 1):
             xr = self._perturb(x_start if not res.converged else res.x, rng)
             r2 = attempt(xr, f_start if not res.converged else res.wrench[self.task], f"{name}+restart({k})")
@@ -1763,11 +1877,10 @@ class EquilibriumSolver:
         r = np.concatenate([tau - gen[vm.theta_idx], -gen[vm.q_idx]])
         tq = np.concatenate([tau, np.zeros(vm.n_q)])
         fn, mn = float(np.abs(w6[:3]).max()), float(np.abs(w6[3:]).max())
-        prism = self.var_scale > 1.0
-        scale = np.where(prism, np.maximum(np.abs(tq), fn + mn / lc), np.maximum(np.abs(tq), fn * lc + mn))
-        scale = np.maximum(scale, np.abs(tq).max() * 1e-3 if tq.size else 0.0)
-        scale = np.maximum(scale, 1e-300)
-        rel = float((np.abs(r) / scale).max()) if r.size else 0.0
+        # the rules shared with check_mechanism
+        from vjm_pin.solver.checks import statics_relative, verdict_agrees
+
+        rel = statics_relative(r, tq, self.var_scale > 1.0, fn, mn, lc)
         off_task = [i for i in range(6) if i not in self.task]
         checks = {
             "statics_relative": rel,
@@ -1786,10 +1899,7 @@ class EquilibriumSolver:
         ctl, end = check_stability_held(b, hm), check_stability(b)
 
         def agrees(given, fresh):
-            if given is None:
-                return True
-            top = fresh.eigenvalues.max() if fresh.eigenvalues.size else -np.inf
-            return bool(given.stable == fresh.stable or abs(top) <= 10 * fresh.tolerance)
+            return verdict_agrees(given, fresh.stable, fresh.eigenvalues, fresh.tolerance)
 
         checks["stable"] = ctl.stable
         checks["stable_end_held"] = end.stable
@@ -1806,36 +1916,21 @@ class EquilibriumSolver:
         return checks
 
     def _check_stiffness(self, res, k, rtol) -> dict:
+        # the rules shared with check_mechanism
+        from vjm_pin.solver.checks import softest_direction, stiffness_fd_error
+
         task = self.task
-        lc = self.length_scale
-        dsc = np.where(np.array(task) < 3, 1.0, 1.0 / lc)  # rotations in units of L_c
-        ks = dsc[:, None] * k * dsc[None, :]
-        ev, vec = np.linalg.eigh(0.5 * (ks + ks.T))
-        j = int(np.argmin(np.abs(ev)))
-        u = vec[:, j] * dsc  # a (m,) direction: m for translations, rad for rotations
-        u /= np.linalg.norm(u / dsc)
+        u = softest_direction(k, task, self.length_scale)
         plain = self._sibling(tol=self.tol, max_iter=self.max_iter, follow_stable=False, restarts=0)
-        ku = k @ u
-        best = np.inf
-        for h in (1e-6 * lc, 1e-8 * lc, 1e-10 * lc):
-            fs = []
-            for sgn in (1.0, -1.0):
-                dt = np.zeros(6)
-                dt[task] = sgn * h * u
-                try:
-                    rr = plain.solve(target=displace(res.position, res.rotation, dt), x0=res.x, wrench0=res.wrench, fast_fail=True)
-                except NoEquilibrium:
-                    rr = None
-                if rr is None or not rr.converged:
-                    break
-                fs.append(rr.wrench[task])
-            if len(fs) < 2:
-                continue
-            fd = (fs[0] - fs[1]) / (2 * h)
-            den = max(np.linalg.norm(ku), np.linalg.norm(fd), 1e-12 * np.abs(k).max(), 1e-300)
-            best = min(best, float(np.linalg.norm(ku - fd) / den))
-            if best <= rtol:
-                break
+
+        def task_wrench(dt):
+            try:
+                rr = plain.solve(target=displace(res.position, res.rotation, dt), x0=res.x, wrench0=res.wrench, fast_fail=True)
+            except NoEquilibrium:
+                return None
+            return rr.wrench[task] if rr.converged else None
+
+        best = stiffness_fd_error(k, u, task, self.length_scale, task_wrench, rtol)
         return {
             "stiffness_checked": True,
             "stiffness_direction": u,

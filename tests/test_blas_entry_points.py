@@ -1,0 +1,70 @@
+"""Public entry points that do dense linear algebra before any solve run under one BLAS thread
+too (vjm_pin/solver/threads.py): ``EquilibriumSolver(vm)`` (inverts K_θ and the metric, order
+6n on a k-subdivided model) and ``unloaded_stiffness``. Found by CPU time above wall time in a
+single-process solve: the second OpenBLAS thread worked outside the limit."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from threadpoolctl import threadpool_info, threadpool_limits
+
+from vjm_pin.model.registry import resolve_model
+
+
+def _blas_threads():
+    return [d["num_threads"] for d in threadpool_info() if d["user_api"] == "blas"]
+
+
+@pytest.fixture
+def two_blas_threads():
+    import scipy.linalg  # noqa: F401  (both OpenBLAS pools loaded, as in the solver)
+
+    with threadpool_limits(limits=2, user_api="blas"):
+        outer = _blas_threads()
+        assert outer and all(n == 2 for n in outer), (
+            f"precondition: BLAS pools at 2 threads, got {outer}"
+        )
+        yield
+
+
+def test_solver_setup_runs_under_one_blas_thread(two_blas_threads, monkeypatch):
+    from vjm_pin.solver import EquilibriumSolver
+
+    seen = []
+    inv = np.linalg.inv
+
+    def recording_inv(a):
+        seen.append(_blas_threads())
+        return inv(a)
+
+    monkeypatch.setattr(np.linalg, "inv", recording_inv)
+    EquilibriumSolver(resolve_model("paper-c-s"))
+    assert seen and all(n == 1 for s in seen for n in s), seen
+    assert all(n == 2 for n in _blas_threads())  # restored
+
+
+def test_unloaded_stiffness_runs_under_one_blas_thread(two_blas_threads, monkeypatch):
+    from vjm_pin.solver import stiffness as smod
+    from vjm_pin.solver import unloaded_stiffness
+
+    seen = []
+    real = smod.stiffness_from_blocks
+
+    def recording(*args, **kwargs):
+        seen.append(_blas_threads())
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(smod, "stiffness_from_blocks", recording)
+    vm = resolve_model("paper-c-s")
+    k = unloaded_stiffness(vm).stiffness
+    assert seen and all(n == 1 for s in seen for n in s), seen
+    assert all(n == 2 for n in _blas_threads())
+    # the same numbers as without the limit (the limit changes threads, not arithmetic)
+    np.testing.assert_allclose(k, real(_blocks(vm), vm.task, "eq30").stiffness, rtol=1e-12, atol=0)
+
+
+def _blocks(vm):
+    from vjm_pin.solver import blocks_at
+
+    return blocks_at(vm, vm.reference, np.zeros(6))
