@@ -249,3 +249,13 @@ class AmbiguousFrame(FrameNotFound):
             f"the robot branches at link '{link}' into joints {self.branches}: choose the end frame; "
             f"candidates: {', '.join(self.candidates)}",
         )
+
+
+class NoCriticalPoint(VjmError):
+    """:func:`~vjm_pin.analysis.critical.critical_load` found no critical point: the followed
+    branch stays stable under a force along the direction up to ``max_deflection`` (m or rad),
+    or the search could not bracket one (the message says which)."""
+
+    def __init__(self, message: str, max_deflection: float = float("nan")):
+        self.max_deflection = max_deflection
+        super().__init__(message)

@@ -29,7 +29,7 @@ import sys
 import warnings
 
 #: Command modules, in the order ``--help`` lists them.
-COMMANDS = ("demo", "analyze", "curve", "view", "map", "models", "schema")
+COMMANDS = ("demo", "analyze", "curve", "critical", "view", "map", "models", "schema")
 
 #: Exit statuses of ``vjm-pin`` (documented in ``vjm-pin --help`` and the README).
 EXIT_OK, EXIT_USAGE, EXIT_ANALYSIS, EXIT_INTERRUPTED = 0, 2, 3, 130

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 #: Commands with a ``--json`` output and a schema in ``vjm_pin/schemas/COMMAND.json``.
-SCHEMAS = ("analyze", "curve", "map", "view", "models")
+SCHEMAS = ("analyze", "curve", "critical", "map", "view", "models")
 
 EXAMPLES = (
     "vjm-pin schema analyze",

@@ -1,0 +1,670 @@
+"""The critical load along a direction, directly: "at what load does it buckle?".
+
+:func:`critical_load` returns the first critical point of the loading path of a serial chain
+along a task direction ``d`` without tracing the whole curve. It is the first critical point
+that :func:`~vjm_pin.analysis.curve.trace_curve` reports on the same path: the same followed
+branch (the end moved along ``d``, every task component held, eq. 5), the same measure and the
+same rule, evaluated by the tracer's own code (:class:`~vjm_pin.analysis.curve._Tracer`):
+
+- ``μ(s)``: the largest eigenvalue of ``Vᵀ sym(H − K) V`` on the null space ``V`` of ``P·[J_θ J_q]``
+  (the components orthogonal to ``d`` held, a dead force along ``d``): the force-control margin
+  is ``−μ``; a critical point is where ``μ`` crosses zero from below (or, ``"imperfect"``, a
+  sharp interior maximum of ``μ < 0``; see :mod:`vjm_pin.analysis.curve`);
+- its kind: ``"bifurcation"`` when just past it the continued branch loses the stability of
+  eq. (23) with the end held (buckling of a straight column: the force is still rising),
+  ``"limit"`` when the branch stays stable with the end held (a force maximum, ``dF/ds = 0``):
+  the tracer's test of eq. (23) at ``s_c + ε`` (its offset), with the eigenvalue there to first
+  order (:func:`_kind`);
+- a rigid start along ``d`` (a straight chain of rigid links, Model A S) is searched along the
+  force at the unloaded configuration (:func:`~vjm_pin.analysis.curve.rigid_start_force`).
+
+Method
+------
+1. The unloaded point ``s₀`` (the reference, as the tracer starts), with ``μ₀ < 0``, the tangent
+   stiffness ``k₀ = dᵀK_C d`` and the tangent ``(δx, δF)`` of eq. (29).
+2. The linearised estimate (eq. 23 as a generalized eigenproblem at fixed geometry, the
+   counterpart of classical linear buckling): with ``H(F) = H₀ + ΔF·H₁`` (``H`` of eq. 23 is
+   linear in the wrench, ``H₁`` at the unit wrench ``δF/k₀``), the smallest ``ΔF > 0`` where
+   ``Vᵀ(H₀ − K + ΔF H₁)V`` becomes singular is ``1/ν_max`` of ``Vᵀ H₁ V y = ν Vᵀ(K − H₀)V y``;
+   the deflection estimate is ``s₀ + ΔF/k₀``.
+3. Safeguarded Newton on ``μ(s) = 0`` with the analytic ``dμ/ds``
+   (:mod:`vjm_pin.analysis.point_kernel`): every evaluation is a warm-started equilibrium
+   reached by the tracer's continuation (tangent predictor, Newton corrector, continuity check)
+   from the nearer end of the current bracket; a step that leaves the bracket is replaced by
+   the secant point of the bracket; without a bracket yet the step at most quadruples the
+   deflection. Between the points of the
+   followed branch the tracer's cubic model of ``μ`` (:meth:`_Tracer.first_event`) checks that
+   no earlier crossing (or imperfect minimum of the margin) hides.
+4. Converged when one more Newton step would move the force by less than ``rtol`` (relative),
+   or the bracket is that narrow (the tracer's own stopping rule at ``refine_tol = 1e3·rtol``),
+   and the deflection too (at a limit point the force is flat, ``dF/ds = 0``).
+
+The buckling mode is the unit eigenvector of the critical matrix at the critical point: eq. (23)
+(end held) at a bifurcation, the force-control matrix (``μ``'s) at a limit or imperfect point,
+by inverse iteration (one Cholesky). Models with loop closures, dead loads or gravity are
+refused with an :class:`~vjm_pin.exceptions.InputError` (``trace_curve`` handles them: the
+mechanism path of this search is not written).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from vjm_pin.analysis.curve import (
+    DIP_DEPTH,
+    FINE_STEP,
+    IMPERFECT_RATIO,
+    OFFSET_ABS,
+    OFFSET_REL,
+    _direction,
+    _hermite_extremum,
+    _max_eig,
+    _Tracer,
+    _unloaded,
+)
+from vjm_pin.exceptions import InputError, NoCriticalPoint
+from vjm_pin.model.format import VjmModel
+from vjm_pin.model.task import task_vector
+from vjm_pin.solver.equilibrium import EquilibriumResult, EquilibriumSolver
+from vjm_pin.solver.lapack import lapack as _lapack
+from vjm_pin.solver.lapack import solve_triangular
+from vjm_pin.solver.stability import (
+    check_stability,
+    check_stability_held,
+    null_space,
+    spectral_norm,
+)
+from vjm_pin.solver.threads import one_blas_thread
+
+#: Default relative force tolerance of the critical point (the tracer's ``1e-3·refine_tol`` at
+#: its default ``refine_tol = 1e-4``).
+RTOL = 1e-7
+#: Default largest number of equilibrium evaluations of the search.
+MAX_ITER = 40
+#: Without ``max_deflection``: the search range is this × the linearised estimate of the
+#: critical deflection, else (no estimate) this fraction of the chain length (m) or 1 rad.
+RANGE_FACTOR = 4.0
+RANGE_NO_ESTIMATE = 0.5
+
+
+@dataclass(frozen=True)
+class CriticalLoad:
+    """The first critical point of the loading path along a direction (module docstring).
+
+    Attributes:
+        force: Critical load (N; N·m along a rotational direction): ``dᵀF``, the external force
+            along the direction that holds the end there (positive when it pushes the end
+            along the direction).
+        deflection: Critical deflection ``s`` along the direction (m, or rad).
+        direction: (6,) unit direction, world axes (translation, rotation).
+        wrench: (6,) external wrench at the critical point (N, N·m), world axes.
+        x: (nq,) configuration at the critical point (Pinocchio coordinates: rad, m).
+        kind: ``"bifurcation"``, ``"limit"`` or ``"imperfect"`` (as
+            :class:`~vjm_pin.analysis.curve.CriticalPoint`).
+        mode: (nq,) buckling mode: unit eigenvector (2-norm over the free coordinates, zero
+            elsewhere; largest component positive) of the critical eigenvalue (eq. 23 at a
+            bifurcation, the force-control matrix otherwise), rad and m per unit.
+        margin: ``μ`` at the critical point (N·m/rad for spring coordinates), ≈ 0 (``−μ`` is
+            ``CurvePoint.force_control_margin``).
+        margin_rate: ``dμ/ds`` there (per m, or per rad); nan when not available.
+        stiffness: Tangent stiffness ``dᵀK_C d`` (N/m, N·m/rad) at the critical point (eq. 30).
+        estimate: Linearised critical load (N, N·m): the start of the search (nan without one).
+        converged: The search met its tolerance and the point is a converged equilibrium
+            (when False, the other fields describe the point of the branch reached, and
+            ``kind`` is the rule applied there).
+        iterations: Equilibrium evaluations of the search (estimate and kind check excluded).
+        residuals: ``location``: relative change of one more Newton step on ``μ`` (of the
+            force, or of the deflection where larger: ``|μ/μ'|·max(|k|, |F/s|)/|F|``; the
+            bracket width where ``μ'`` is not available; 0 for an imperfect point, an extremum
+            located by the tracer's search), ``margin``: ``|μ|/‖K_θ‖₂``, and the equilibrium's
+            own residuals ``position`` (m), ``orientation`` (rad), ``statics`` (N·m).
+        equilibrium: The :class:`~vjm_pin.solver.EquilibriumResult` at the critical point.
+        message: Why it did not converge ("" when it did).
+    """
+
+    force: float
+    deflection: float
+    direction: np.ndarray
+    wrench: np.ndarray
+    x: np.ndarray
+    kind: str
+    mode: np.ndarray
+    margin: float
+    margin_rate: float
+    stiffness: float
+    estimate: float
+    converged: bool
+    iterations: int
+    residuals: dict
+    equilibrium: EquilibriumResult = field(repr=False)
+    message: str = ""
+
+    def check(self, rtol: float = 1e-6) -> bool:
+        """True when the search converged, the located force is within ``rtol`` (relative) of
+        the root of ``μ`` and the equilibrium converged."""
+        r = self.residuals.get("location", float("nan"))
+        return bool(self.converged and getattr(self.equilibrium, "converged", False) and r <= rtol)
+
+
+# --------------------------------------------------------------------------- pieces
+def _basis(tr: _Tracer, b):
+    """(Z, V): orthonormal bases of the null space of ``[J_θ J_q]`` (eq. 21, end held) and of
+    ``P·[J_θ J_q]`` (force control along d), in (θ, q) order: one QR of the point kernel
+    (``V = [Z, y₀/‖y₀‖]``), else SVDs."""
+    if tr.kernel is not None:
+        jac, _ = tr.kernel.matrices(b)
+        f = tr.kernel.factor(jac)
+        if f is not None:
+            q, _, y0 = f
+            m = tr.kernel.m
+            z = q[:, m:]
+            return z, np.hstack([z, (y0 / np.sqrt(y0 @ y0))[:, None]])
+    z = null_space(b.J_theta, b.J_q)
+    v = null_space(tr.P @ b.J_theta, tr.P @ b.J_q)
+    return z, v
+
+
+def _a_matrix(b) -> np.ndarray:
+    """``H − diag(K_θ, 0)`` in (θ, q) order (the matrix of eq. 23 before reduction)."""
+    nt = b.H_tt.shape[0]
+    n = nt + b.H_qq.shape[0]
+    a = np.empty((n, n))
+    a[:nt, :nt] = b.H_tt - b.K_theta
+    a[:nt, nt:] = b.H_tq
+    a[nt:, :nt] = b.H_qt
+    a[nt:, nt:] = b.H_qq
+    return a
+
+
+def _sym(m):
+    return 0.5 * (m + m.T)
+
+
+def _largest_eigenpair(m: np.ndarray, above: float, scale: float):
+    """(λ_max, unit eigenvector) of the symmetric ``m`` whose eigenvalues are all below
+    ``above`` (+ rounding): inverse iteration with the shift ``above + 1e-9·scale`` (one Cholesky
+    of the positive definite ``σI − m``, LAPACK), accepted when the eigen-residual is below
+    ``1e-9·scale``; else the full ``eigh``."""
+    n = m.shape[0]
+    sigma = above + 1e-9 * scale
+    ch, info = _lapack.dpotrf(sigma * np.eye(n) - m, lower=0)
+    if info == 0:
+        y = np.full((n, 1), 1.0 / np.sqrt(n))
+        y[::2] *= -0.5  # not orthogonal to the wanted vector (a generic start)
+        for _ in range(6):
+            y, info = _lapack.dpotrs(ch, y, lower=0)
+            if info:
+                break
+            y /= np.linalg.norm(y)
+            v = y[:, 0]
+            mv = m @ v
+            lam = float(v @ mv)
+            if np.linalg.norm(mv - lam * v) <= 1e-9 * scale:
+                return lam, v
+    ev, u = np.linalg.eigh(m)
+    return float(ev[-1]), u[:, -1]
+
+
+def linearised_load(tr: _Tracer, p0) -> float | None:
+    """Step 2 of the module docstring: the load increment ``ΔF`` (N, N·m) above ``p0`` at which
+    the force-control matrix of eq. (23) becomes singular with the geometry of ``p0`` frozen
+    (``H`` linear in the wrench), or None (no positive root, or ``μ₀ ≥ 0``)."""
+    t = tr.tangent(p0)
+    if t is None or not (np.isfinite(p0.k) and p0.k > 0):
+        return None
+    x0, w0 = p0.eq.x, p0.eq.wrench
+    b0 = tr.blocks(x0, w0)
+    _, v = _basis(tr, b0)
+    if v.shape[1] == 0:
+        return None
+    a = -_sym(v.T @ _a_matrix(b0) @ v)
+    b1 = tr.blocks(x0, t[1] / p0.k)  # the wrench per unit force along d (eq. 29)
+    h1 = _a_matrix(b1)
+    nt = b1.H_tt.shape[0]
+    h1[:nt, :nt] += b1.K_theta  # H₁ alone
+    bm = _sym(v.T @ h1 @ v)
+    lo, info = _lapack.dpotrf(a, lower=1)
+    if info:
+        return None
+    try:
+        y = solve_triangular(lo, bm, lower=True)  # L⁻¹ B
+        c = solve_triangular(lo, y.T.copy(), lower=True)  # L⁻¹ (L⁻¹ B)ᵀ = L⁻¹ B L⁻ᵀ
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    n = c.shape[0]
+    w, _, _, _, info = _lapack.dsyevr(_sym(c), compute_v=0, range="I", il=n, iu=n)
+    if info:
+        return None
+    nu = float(w[0])
+    return 1.0 / nu if nu > 0 else None
+
+
+def _mode(tr: _Tracer, c, held: bool) -> np.ndarray:
+    """The buckling mode (nq,) at the point ``c``: the critical eigenvector of eq. (23)
+    (``held``) or of the force-control matrix (its eigenvalue is ``c.mu``, the largest)."""
+    b = tr.blocks(c.eq.x, c.eq.wrench)
+    z, v = _basis(tr, b)
+    basis = z if held and z.shape[1] else v
+    out = np.zeros_like(c.eq.x)
+    if basis.shape[1] == 0:
+        return out
+    scale = spectral_norm(tr.vm.K_theta) if tr.vm.K_theta.size else 1.0
+    red = _sym(basis.T @ _a_matrix(b) @ basis)
+    _, u = _largest_eigenpair(red, max(c.mu, 0.0), scale)  # eq. 23's eigenvalues are ≤ μ
+    w = basis @ u
+    w /= np.linalg.norm(w)
+    i = int(np.argmax(np.abs(w)))
+    out[tr.free] = w if w[i] >= 0 else -w
+    return out
+
+
+def _scan(tr: _Tracer, lo, q, depth: int = 0):
+    """The first event of the followed branch over ``[lo, q]`` (``lo.mu < 0``), by the tracer's
+    rule: ``("cross", a, b)`` (μ crosses zero from below in ``[a, b]``), ``("max", a, b)`` (an
+    interior maximum of μ < 0 to be checked for an imperfect bifurcation) or None. When
+    ``q.mu ≥ 0`` the cubic model of μ on the bracket is sampled at its interior maximum if that
+    comes near zero, so that an earlier crossing cannot hide (as
+    :meth:`~vjm_pin.analysis.curve._Tracer.first_event` does for two negative ends)."""
+    if q.mu < 0:
+        return tr.first_event(lo, q)
+    if depth >= DIP_DEPTH or q.s - lo.s <= 4 * tr.hmin:
+        return ("cross", lo, q)
+    g0, g1 = tr.dmu(lo), tr.dmu(q)
+    if not (np.isfinite(g0) and np.isfinite(g1)):
+        return ("cross", lo, q)
+    ext = _hermite_extremum(lo.s, lo.mu, g0, q.s, q.mu, g1, maximum=True)
+    if ext is None or ext[1] < -0.5 * ext[2]:
+        return ("cross", lo, q)
+    m = tr.reach(lo, lo.s + ext[0] * (q.s - lo.s))
+    if m is None:
+        return ("cross", lo, q)
+    if m.mu >= 0:
+        return _scan(tr, lo, m, depth + 1)
+    return tr.first_event(lo, m) or _scan(tr, m, q, depth + 1)
+
+
+def _newton_point(p, g, lo, hi, flo, fhi) -> float:
+    """The next trial deflection: Newton on μ from ``p`` with the rate ``g`` (``dμ/ds``) when it
+    stays inside the bracket ``[lo, hi]``, else the regula falsi point of the bracket with the
+    (Illinois-weighted) end values ``flo < 0 ≤ fhi``; without a bracket (``hi`` None) the Newton
+    point when it lies ahead of ``lo``, else nan (the caller steps on)."""
+    s = p.s - p.mu / g if g is not None and np.isfinite(g) and g != 0 else float("nan")
+    if hi is None:
+        return s if np.isfinite(s) and s > lo.s and g > 0 else float("nan")
+    if np.isfinite(s) and lo.s < s < hi.s:
+        return s
+    return lo.s + flo / (flo - fhi) * (hi.s - lo.s)
+
+
+class _Search:
+    """The bracketing Newton search of step 3 (module docstring) on one tracer."""
+
+    def __init__(self, tr: _Tracer, rtol: float, max_iter: int, s_max: float):
+        self.tr, self.rtol, self.max_iter, self.s_max = tr, rtol, max_iter, s_max
+        self.n = 0
+        self.message = ""
+        self.location = float("nan")  # the relative force tolerance met (done)
+        self.stable_to_end = False  # the branch stayed stable under force control up to s_max
+        self.best = None  # the point of the branch nearest to the critical point so far
+        self.g_last = float("nan")  # the last available dμ/ds (the kernel may decline at a point)
+
+    def rate(self, p) -> float:
+        """``dμ/ds`` at ``p``, or the last one available (at the critical point itself the
+        matrix of eq. 28 may be singular and the rate not defined there; it varies slowly)."""
+        g = self.tr.dmu(p)
+        if np.isfinite(g) and g != 0:
+            self.g_last = g
+            return g
+        return self.g_last
+
+    def evaluate(self, base, s):
+        self.n += 1
+        return (
+            self.tr.reach_or_predict(base, s)
+            if abs(s - base.s) <= FINE_STEP * self.s_max
+            else self.tr.reach(base, s)
+        )
+
+    def done(self, p, lo, hi) -> bool:
+        """The tracer's stopping rule (the bracket, or one more Newton step, moves the force by
+        at most rtol relative), and the deflection to rtol relative as well (at a limit point
+        the force is flat: ``k → 0``)."""
+        f = max(abs(p.force), 1e-300)
+        k = max(abs(p.k) if np.isfinite(p.k) else 0.0, f / max(abs(p.s), 1e-300))
+        g = self.rate(p)
+        if np.isfinite(g) and abs(p.mu / g) * k <= self.rtol * f:
+            self.location = abs(p.mu / g) * k / f
+            return True
+        if hi is not None:
+            kk = max(abs(lo.k), abs(hi.k)) if np.isfinite(lo.k) and np.isfinite(hi.k) else 0.0
+            kk = max(kk, f / max(abs(p.s), 1e-300))
+            w = hi.s - lo.s
+            if w * kk <= self.rtol * f or w <= 1e-13 * self.s_max:
+                self.location = w * kk / f
+                return True
+        return False
+
+    def bracket(self, lo, s):
+        """March from ``lo`` (μ < 0): returns the first event ``(kind, a, b)`` or None."""
+        tr = self.tr
+        while self.n < self.max_iter:
+            s = min(s, self.s_max)
+            q = self.evaluate(lo, s)
+            if q is None:
+                h = 0.5 * (s - lo.s)
+                if h < tr.hmin:
+                    self.message = (
+                        f"the loading path could not be continued past deflection {lo.s:.6g}"
+                    )
+                    return None
+                s = lo.s + h
+                continue
+            ev = _scan(tr, lo, q)
+            if ev is not None:
+                return ev
+            if self.done(q, lo, None):  # the root within rtol just past q (μ(q) < 0, Newton)
+                return ("near", lo, q)
+            tr.seg_margin = max(tr.seg_margin, -lo.mu)
+            self.best = q
+            if q.s >= self.s_max:
+                self.stable_to_end = True
+                return None
+            lo = q
+            nxt = _newton_point(lo, self.rate(lo), lo, None, lo.mu, None)
+            # Newton ahead, at most quadrupling the deflection (doubling without a Newton point)
+            s = nxt if np.isfinite(nxt) else 2.0 * lo.s
+            s = min(max(s, lo.s + tr.hmin), lo.s + 4.0 * max(lo.s, tr.hmin))
+        self.message = f"no bracket of the critical point within {self.max_iter} evaluations"
+        return None
+
+    def root(self, lo, hi):
+        """Safeguarded Newton on μ in the bracket ``[lo, hi]`` (``lo.mu < 0 ≤ hi.mu``): the point
+        at the root (with a message when the budget ran out first), an earlier event
+        ``(kind, a, b)`` found inside the bracket, or None (no equilibrium; message set)."""
+        tr = self.tr
+        p = hi if abs(hi.mu) < abs(lo.mu) else lo
+        if self.done(p, lo, hi):
+            return p
+        flo, fhi, side = lo.mu, hi.mu, 0
+        while self.n < self.max_iter:
+            s = _newton_point(p, self.rate(p), lo, hi, flo, fhi)
+            base = lo if s - lo.s <= hi.s - s else hi
+            m = self.evaluate(base, s)
+            if m is None:
+                self.message = (
+                    f"no equilibrium on the branch at deflection {s:.6g} inside the bracket"
+                )
+                return None
+            if m.mu < 0:
+                ev = tr.first_event(lo, m) if m.s > lo.s else None
+                if ev is not None and ev[2] is not m:  # an earlier event between lo and m
+                    return ev
+                lo, flo = m, m.mu
+                fhi, side = (0.5 * fhi if side == -1 else fhi), -1  # Illinois: no stalled end
+            else:
+                hi, fhi = m, m.mu
+                flo, side = (0.5 * flo if side == 1 else flo), 1
+            p = self.best = m
+            if self.done(m, lo, hi):
+                return m
+        self.message = f"the critical point was not located to rtol={self.rtol:g} in {self.max_iter} evaluations"
+        return p
+
+
+def _start(vm, tr: _Tracer, solver: EquilibriumSolver, d: np.ndarray):
+    """The first point of ``trace_curve``'s path: the unloaded reference when the chain is rigid
+    along ``d`` there (:func:`~vjm_pin.analysis.curve._unloaded`), else ``solver.solve(0)``.
+    Where the reference is a stable unloaded equilibrium (no spring preload; eq. 23 negative
+    definite) ``solver.solve(0)`` returns it after 0 iterations, so it is taken directly (the
+    rigidity test of ``_unloaded`` is then ``k = dᵀK_C d`` infinite at that point)."""
+    x = np.asarray(vm.reference, float).copy()
+    stat = vm.K_theta @ (x[vm.theta_idx] - vm.theta0)
+    if not (stat.size and np.abs(stat).max() > 0):
+        b = tr.blocks(x, np.zeros(6))
+        probe = EquilibriumResult(
+            x=x,
+            q=x[vm.q_idx].copy(),
+            theta=x[vm.theta_idx].copy(),
+            wrench=np.zeros(6),
+            deflection=np.zeros(6),
+            position=solver.p0.copy(),
+            rotation=solver.r0.copy(),
+            converged=True,
+            iterations=0,
+            residuals={"position": 0.0, "orientation": 0.0, "statics": 0.0},
+            energy=0.0,
+            path="reference",
+            stability=check_stability(b),
+        )
+        p0 = tr.point(probe, 0.0)
+        if np.isinf(p0.k) or (np.isfinite(p0.k) and p0.lam < -tr.thr):
+            return p0
+    probe = _unloaded(vm, solver, d, solver.kin)
+    return tr.point(probe if probe is not None else solver.solve(0.0 * d), 0.0)
+
+
+# --------------------------------------------------------------------------- public
+@one_blas_thread
+def critical_load(
+    vm: VjmModel,
+    direction,
+    *,
+    solver: EquilibriumSolver | None = None,
+    max_deflection: float | None = None,
+    rtol: float = RTOL,
+    max_iter: int = MAX_ITER,
+) -> CriticalLoad:
+    """The first critical load of ``vm`` along ``direction`` (module docstring), directly.
+
+    Args:
+        vm: The model (a serial chain without closures).
+        direction: (3,) or (6,) direction of the end deflection, world axes
+            (:func:`~vjm_pin.model.task.task_vector`); normalised; in the task components, a
+            pure translation or rotation.
+        solver: The :class:`~vjm_pin.solver.EquilibriumSolver` to use (default a new one).
+        max_deflection: Search the path up to this deflection (m or rad); default
+            :data:`RANGE_FACTOR` × the linearised estimate (or :data:`RANGE_NO_ESTIMATE` × the
+            chain length, 1 rad along a rotation, without one).
+        rtol: Relative force tolerance of the location (default 1e-7, as ``trace_curve``).
+        max_iter: Largest number of equilibrium evaluations of the search.
+
+    Returns:
+        The :class:`CriticalLoad`; ``converged`` False (with ``message``) when the search did
+        not meet its tolerance: the best point found is returned, not hidden.
+
+    Raises:
+        InputError: bad direction, options, a model with closures or another solver.
+        NoCriticalPoint: the followed branch stays stable under a force along the direction
+            up to ``max_deflection``.
+        NoEquilibrium: no unloaded equilibrium to start from.
+    """
+    if getattr(vm, "closures", ()):
+        raise InputError(
+            "critical_load supports serial chains only (this model has loop closures): use trace_curve"
+        )
+    if not (isinstance(rtol, (int, float)) and 1e-13 <= rtol <= 0.1):
+        raise InputError(f"rtol must be a number from 1e-13 to 0.1, got {rtol!r}")
+    if int(max_iter) != max_iter or max_iter < 1:
+        raise InputError(f"max_iter must be a positive integer, got {max_iter!r}")
+    if max_deflection is not None and not (np.isfinite(max_deflection) and max_deflection > 0):
+        raise InputError(
+            f"max_deflection must be a positive number (m or rad), got {max_deflection}"
+        )
+    d = _direction(vm, task_vector(direction, vm.task, "direction", "m or rad"))
+    if solver is None:
+        solver = EquilibriumSolver(vm)
+    elif not isinstance(solver, EquilibriumSolver):
+        raise InputError("critical_load needs an EquilibriumSolver (serial chains) as solver")
+    if solver.vm is not vm:
+        raise InputError("the solver was built for another model")
+    rotation = bool(np.any(d[3:]))
+    # the tracer's range only sets its smallest sub-step (1e-10 of it); the search range
+    # (s_max, below) sets the offsets of the kind test and the fine-step rule
+    r0 = max_deflection or (1.0 if rotation else solver.length_scale)
+    tr = _Tracer(vm, d, r0, solver, 1e3 * rtol)
+    p0 = _start(vm, tr, solver, d)
+    if not np.isfinite(p0.k):
+        return _rigid(vm, tr, p0, d)
+    if p0.mu >= 0:
+        raise NoCriticalPoint(
+            "the unloaded equilibrium is already unstable under a force along the direction "
+            f"(force-control margin {-p0.mu:.3g}): no critical point to approach",
+            max_deflection=0.0,
+        )
+    df = linearised_load(tr, p0)
+    s_est = p0.s + df / p0.k if df is not None else float("nan")
+    if max_deflection is not None:
+        s_max = float(max_deflection)
+    else:
+        s_max = RANGE_FACTOR * s_est if np.isfinite(s_est) else RANGE_NO_ESTIMATE * r0
+    search = _Search(tr, rtol, int(max_iter), s_max)
+    tr.seg_margin = max(0.0, -p0.mu)
+    tr.dmu(p0)
+    lo, ev, c = p0, None, None
+    s = s_est if np.isfinite(s_est) and 0 < s_est else s_max / 16
+    while search.n < search.max_iter:
+        ev = search.bracket(lo, s) if ev is None else ev
+        if ev is None:
+            break
+        kind, a, b = ev
+        if kind == "near":
+            c = b
+            break
+        if kind == "max":
+            c, _ = tr.locate_max(a, b)
+            if 0 < -c.mu <= IMPERFECT_RATIO * max(tr.seg_margin, -a.mu):
+                return _result(vm, tr, c, "imperfect", df, p0, search, True)
+            tr.seg_margin = max(tr.seg_margin, -a.mu, -b.mu)
+            lo, ev, c, s = b, None, None, b.s + (b.s - a.s)  # not critical: march on
+            continue
+        c = search.root(a, b)
+        if isinstance(c, tuple):  # an earlier event found inside the bracket
+            ev = c
+            continue
+        break
+    if c is None:
+        if search.stable_to_end or search.best is None:
+            raise NoCriticalPoint(
+                "no critical point: the followed branch stays stable under a force along the "
+                f"direction up to deflection {s_max:.6g} {'rad' if rotation else 'm'}"
+                if search.stable_to_end
+                else f"no critical point located: {search.message}",
+                max_deflection=s_max,
+            )
+        # not converged: the nearest point reached is reported with the reason, not hidden
+        return _result(
+            vm, tr, search.best, _kind(tr, search.best, s_max, search.g_last), df, p0, search, False
+        )
+    ok = not search.message
+    return _result(vm, tr, c, _kind(tr, c, s_max, search.g_last), df, p0, search, ok)
+
+
+def _kind(tr: _Tracer, c, s_max: float, g_last: float = float("nan")) -> str:
+    """The tracer's rule (:meth:`_Tracer.finish`): ``"bifurcation"`` when the continued branch
+    at ``s_c + ε`` has lost eq. (23) (its largest eigenvalue ``λ ≥ −thr``), else ``"limit"``.
+
+    ``λ(s_c + ε)`` is taken to first order, ``λ(s_c) + ε·|dμ/ds|``: where the continued branch
+    loses eq. (23) at the critical point, eq. (23)'s critical eigenvector is ``μ``'s (it keeps
+    the end fixed) and ``λ`` moves with ``μ``. No equilibrium is solved: next to a pitchfork the
+    corrector started at the singular point itself may land on the bent branch (which is stable),
+    while the tracer reaches ``s_c + ε`` from the far end of its bracket. Where ``dμ/ds`` is not
+    available at ``c`` the last rate of the search (``g_last``) is used, and without one the
+    tracer's own continuation decides."""
+    eps = max(OFFSET_REL * abs(c.s), OFFSET_ABS * s_max)  # the tracer's offset for a curve to s_max
+    g = tr.dmu(c)
+    if not np.isfinite(g):
+        g = g_last
+    if not np.isfinite(g):
+        plus = tr.reach_or_predict(c, c.s + eps)
+        return "bifurcation" if plus is None or plus.lam >= -tr.thr else "limit"
+    return "bifurcation" if c.lam >= -max(tr.thr, eps * abs(g)) else "limit"
+
+
+def _result(vm, tr, c, kind, df, p0, search, ok) -> CriticalLoad:
+    eq = c.eq
+    msg = search.message
+    if getattr(eq, "path", "") == "tangent-prediction":  # re-solve the predicted point
+        sol = tr.cont._solve_local(c.s * tr.d, eq.x)
+        if sol is not None:
+            c = tr.point(sol, c.s)
+            eq = c.eq
+        else:
+            ok, msg = (
+                False,
+                msg or "the critical point is a tangent prediction (no converged equilibrium)",
+            )
+    g = tr.dmu(c)
+    f = max(abs(c.force), 1e-300)
+    k = max(abs(c.k) if np.isfinite(c.k) else 0.0, f / max(abs(c.s), 1e-300))
+    g_loc = g if np.isfinite(g) and g != 0 else search.g_last
+    loc = abs(c.mu / g_loc) * k / f if np.isfinite(g_loc) else search.location
+    if kind == "imperfect":
+        loc = 0.0  # an extremum of μ, located by the tracer's own search (locate_max)
+    scale = spectral_norm(vm.K_theta) if vm.K_theta.size else 1.0
+    res = {
+        "location": float(loc),
+        "margin": float(abs(c.mu) / scale),
+        **{k_: float(v) for k_, v in eq.residuals.items()},
+    }
+    return CriticalLoad(
+        force=float(c.force),
+        deflection=float(c.s),
+        direction=tr.d.copy(),
+        wrench=np.asarray(eq.wrench, float).copy(),
+        x=np.asarray(eq.x, float).copy(),
+        kind=kind,
+        mode=_mode(tr, c, kind == "bifurcation"),
+        margin=float(c.mu),
+        margin_rate=float(g),
+        stiffness=float(c.k),
+        estimate=float(p0.force + df) if df is not None else float("nan"),
+        converged=bool(ok and eq.converged),
+        iterations=int(search.n),
+        residuals=res,
+        equilibrium=eq,
+        message=""
+        if ok and eq.converged
+        else (msg or "the equilibrium at the critical point did not converge"),
+    )
+
+
+def _rigid(vm, tr, p0, d) -> CriticalLoad:
+    """A start rigid along ``d``: the tracer's search along the force at the unloaded
+    configuration (deflection 0; always a bifurcation, as in ``trace_curve``)."""
+    found = tr.rigid_start(p0) if p0.mu < 0 else None
+    if found is None:
+        raise NoCriticalPoint(
+            "the chain is rigid along the direction at the unloaded configuration and no force "
+            "along it makes it unstable",
+            max_deflection=0.0,
+        )
+    f, u = found
+    eq = u.eq
+    b = tr.blocks(eq.x, eq.wrench)
+    mu = _max_eig(check_stability_held(b, tr.P))
+    scale = spectral_norm(vm.K_theta) if vm.K_theta.size else 1.0
+
+    res = {
+        "location": 0.0,
+        "margin": float(abs(mu) / scale),
+        **{k: float(v) for k, v in eq.residuals.items()},
+    }
+    return CriticalLoad(
+        force=float(f),
+        deflection=0.0,
+        direction=d.copy(),
+        wrench=np.asarray(eq.wrench, float).copy(),
+        x=np.asarray(eq.x, float).copy(),
+        kind="bifurcation",
+        mode=_mode(tr, u, True),
+        margin=float(mu),
+        margin_rate=float("nan"),
+        stiffness=float(p0.k),
+        estimate=float("nan"),
+        converged=True,
+        iterations=0,
+        residuals=res,
+        equilibrium=eq,
+    )
