@@ -207,6 +207,7 @@ def test_progress_callback_and_point_fields():
         ({"direction": [1, 0, 0], "max_deflection": -1.0}, "positive"),
         ({"direction": [1, 0, 0], "max_deflection": 0.1, "steps": 0}, "steps"),
         ({"direction": [np.nan, 0, 0], "max_deflection": 0.1}, "finite"),
+        ({"direction": [1, 0], "max_deflection": 0.1}, "direction must have 3 or 6 components"),
     ],
 )
 def test_bad_input(kwargs, match):
@@ -375,3 +376,42 @@ def test_force_maximum_after_buckling_is_a_limit_point():
         eq = sol.solve(np.array([-(lim.deflection + ds), 0, 0, 0, 0, 0]), x0=c.points[i].equilibrium.x)
         assert -eq.wrench[0] < lim.force
     assert lim.stiffness_before > 0 > lim.stiffness_after
+
+
+@pytest.mark.parametrize(
+    "name, direction, max_deflection, steps",
+    [("paper-c-s", [-1, 0, 0], 0.0025, 40), ("ur5", [0, 0, -1], 1e-3, 6)],
+)
+def test_second_order_predictor_keeps_the_curve_with_fewer_newton_iterations(
+    name, direction, max_deflection, steps
+):
+    """The optional predictor (``curve._second_order``) between grid points with the change of
+    the tangent (eq. 29) since the previous point: the same curve as the first-order predictor — equilibria converged to the
+    solver's tolerance either way, so forces within 1e-8, the same verdicts, the same critical
+    points (kind, index, force within their location tolerance) — in fewer Newton iterations on
+    the bent branch (Model C past buckling)."""
+    from vjm_pin.analysis import curve as curve_mod
+
+    vm = resolve_model(name)
+    old = curve_mod._second_order
+    try:
+        curve_mod._second_order = False
+        first = trace_curve(vm, direction, max_deflection, steps=steps)
+        curve_mod._second_order = True
+        second = trace_curve(vm, direction, max_deflection, steps=steps)
+    finally:
+        curve_mod._second_order = old
+    assert len(second.points) == len(first.points)
+    scale = np.abs(first.forces).max()
+    assert np.abs(second.forces - first.forces).max() <= 1e-8 * scale
+    for p, q in zip(first.points, second.points):
+        assert (p.stable, p.stable_end_held) == (q.stable, q.stable_end_held)
+        assert q.stiffness == pytest.approx(p.stiffness, rel=1e-6, abs=1e-9 * scale / max_deflection)
+    assert [(c.kind, c.index) for c in second.critical] == [(c.kind, c.index) for c in first.critical]
+    for a, c in zip(first.critical, second.critical):
+        assert c.force == pytest.approx(a.force, rel=1e-7)
+    if name == "paper-c-s":
+        assert len(first.critical) == 1
+        i = first.critical[0].index
+        its = [sum(p.equilibrium.iterations for p in c.points[i + 1:]) for c in (first, second)]
+        assert its[1] < its[0], its

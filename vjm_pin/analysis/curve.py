@@ -14,8 +14,10 @@ The end is moved along a fixed unit direction ``d`` (deflection ``s·d``, ``s`` 
 translation, rad for a rotation) with every task component held: the loaded equilibrium
 of eq. (5) is deflection-driven. The *followed branch* is traced by predictor–corrector
 continuation: the tangent predictor of eq. (29) (``δq = K_q δt``, ``δθ = K_θ δt``,
-``δF = K_C δt`` with ``δt = δs·d``), a plain Newton corrector, and adaptive sub-steps inside
-every requested step. A sub-step is accepted only when the corrected configuration stays
+``δF = K_C δt`` with ``δt = δs·d``; optionally, ``_second_order``, along the followed branch
+plus the term ``½δs²·(t_a − t_prev)/(s_a − s_prev)`` from the tangents of the last two points,
+error O(δs³)), a plain Newton corrector, and adaptive sub-steps inside every requested step.
+A sub-step is accepted only when the corrected configuration stays
 close to the prediction (``‖x − x_pred‖ ≤`` :data:`CORRECTOR_RATIO` ``·‖x_pred − x_a‖``,
 scaled by rad and the chain length, the prediction itself at most :data:`MAX_MOVE`), and
 a sub-step over which a stability verdict changes only when it is short
@@ -75,6 +77,7 @@ branch at ``s_c ∓ ε``, ``ε = max(`` :data:`OFFSET_REL` ``·|s_c|,`` :data:`O
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
@@ -85,6 +88,7 @@ from vjm_pin.exceptions import InputError, NoEquilibrium, SingularStiffness
 from vjm_pin.kinematics.chain import flush_tiny
 from vjm_pin.kinematics.dead_loads import Load
 from vjm_pin.model.format import VjmModel
+from vjm_pin.model.task import task_vector
 from vjm_pin.solver.equilibrium import EquilibriumResult, EquilibriumSolver
 from vjm_pin.solver.mechanism import MechanismSolver
 from vjm_pin.solver.stability import (
@@ -125,6 +129,14 @@ DIP_DEPTH = 12
 _fast_points = True
 #: Private switch (False: dμ/ds by the forward difference of :meth:`_Tracer.dmu` everywhere).
 _analytic_rate = True
+#: Private switch (True: the second-order predictor along the followed branch, used only with
+#: ``_fast_points``; off by default: it halves the Newton iterations past buckling but was not
+#: measurably faster per point, and it moves the equilibria within the solver's tolerance).
+_second_order = False
+#: The second-order predictor term of a sub-step ``ds`` uses the tangent of the point continued
+#: from when that point lies at least this × ``|ds|`` behind (a shorter difference quotient of
+#: the tangent is dominated by rounding).
+SECOND_ORDER_BACK = 0.25
 
 
 @dataclass(frozen=True)
@@ -216,23 +228,13 @@ class Curve:
 
 
 def _direction(vm: VjmModel, direction) -> np.ndarray:
-    d = np.asarray(direction, dtype=float).ravel()
-    if d.size == 3:
-        d = np.concatenate([d, np.zeros(3)])
-    if d.size != 6 or not np.all(np.isfinite(d)):
-        raise InputError(
-            f"direction must be 3 or 6 finite numbers, got {np.asarray(direction).tolist()}"
-        )
+    """The unit (6,) direction of a curve: 3 or 6 finite numbers in the task
+    (:func:`~vjm_pin.model.task.task_vector`), not zero, a pure translation or rotation."""
+    d = task_vector(direction, vm.task, "direction", "translation or rotation; normalised")
     n = np.linalg.norm(d)
     if n == 0:
         raise InputError("direction must not be zero")
     d = d / n
-    names = ["x", "y", "z", "rx", "ry", "rz"]
-    off = [names[i] for i in range(6) if i not in vm.task and abs(d[i]) > 0]
-    if off:
-        raise InputError(
-            f"direction has components {off} outside the task {vm.task_names}: the end is free there"
-        )
     if np.any(d[:3]) and np.any(d[3:]):
         raise InputError(
             "direction must be a pure translation or a pure rotation (the force would mix N and N·m)"
@@ -370,15 +372,20 @@ class _BP:
     """A point of a continued branch (internal): equilibrium, force, tangent stiffness,
     eq. (30) result, ``μ`` (force control) and ``λ`` (largest eigenvalue of eq. 23)."""
 
-    __slots__ = ("dmu", "eq", "force", "k", "lam", "mu", "s", "st", "tan")
+    __slots__ = ("dmu", "eq", "force", "hist", "k", "lam", "mu", "s", "st", "tan")
 
     def __init__(self, s, eq, force, k, st, mu, lam):
         self.s, self.eq, self.force, self.k, self.st = float(s), eq, float(force), k, st
         self.mu, self.lam, self.dmu, self.tan = mu, lam, None, False
+        self.hist = None  # (s, tangent) of the point it was continued from (the second-order predictor)
 
 
 class _Tracer:
     """The followed branch of one curve and its critical points (module docstring)."""
+
+    #: The second-order predictor between grid points (set per instance; off for subclasses
+    #: with their own :meth:`step`).
+    second_order = False
 
     def __init__(self, vm, d, max_deflection, solver: EquilibriumSolver, refine_tol):
         self.vm, self.d, self.solver = vm, d, solver
@@ -402,6 +409,9 @@ class _Tracer:
         self.mask = self.kin.support_mask(self.free) if _fast_points and getattr(self.kin, "uses_screw", False) else None
         self._fn = None  # the compiled point kernel once wanted (point_kernel.use_compiled)
         self._npts = 0
+        self._zero_x = np.zeros(vm.model.nq)  # templates of the tangent (δx, δF) of a point
+        self._zero_w = np.zeros(6)
+        self.second_order = _fast_points and _second_order  # the predictor (step)
 
     # ------------------------------------------------------------------ evaluation
     def blocks(self, x, w):
@@ -427,9 +437,9 @@ class _Tracer:
             p = _BP(s, eq, self.d @ eq.wrench, k, None, mu, lam)
             if rate is not None and _analytic_rate:
                 p.dmu = rate
-            x_dot = np.zeros_like(eq.x)
+            x_dot = self._zero_x.copy()
             x_dot[self.free] = xd
-            w_dot = np.zeros(6)
+            w_dot = self._zero_w.copy()
             w_dot[self.task] = fd
             p.tan = (x_dot, w_dot)
             return p
@@ -479,17 +489,33 @@ class _Tracer:
         return float(np.abs(dx[self.free] / self.var_scale).max()) if dx.size else 0.0
 
     # ------------------------------------------------------------------ continuation
-    def step(self, a: _BP, s: float) -> _BP | None:
-        """``a``'s branch continued to ``s``: predictor (eq. 29), plain Newton corrector,
-        continuity check; None when the corrector strays (or does not converge)."""
+    def step(self, a: _BP, s: float, second_order: bool = False) -> _BP | None:
+        """``a``'s branch continued to ``s``: predictor (eq. 29; with ``second_order`` plus
+        the term from the change of the tangent since the point ``a`` was continued from, error
+        O(δs³): the followed branch between grid points), plain Newton corrector, continuity
+        check; None when the corrector strays (or does not converge)."""
         s = float(s)
         t = self.tangent(a)
         ds = s - a.s
         if t is not None:
-            x_pred = flush_tiny(a.eq.x + ds * t[0])  # no subnormal coordinates (FLUSH_BELOW)
-            w_pred = a.eq.wrench + ds * t[1]
+            dx, dw = ds * t[0], ds * t[1]
+            h = a.hist if second_order else None
+            if h is not None:
+                # second order: the tangent's change since the point ``a`` was continued from
+                # (a difference quotient of eq. 29's tangent over a step not much shorter than ds)
+                back = a.s - h[0]
+                if abs(back) >= SECOND_ORDER_BACK * abs(ds) and abs(back) >= 1e-6 * self.range:
+                    c = 0.5 * ds * ds / back
+                    dx = dx + c * (t[0] - h[1])
+                    dw = dw + c * (t[1] - h[2])
+            x_pred = flush_tiny(a.eq.x + dx)  # no subnormal coordinates (FLUSH_BELOW)
+            w_pred = a.eq.wrench + dw
+            move = self.scaled(x_pred - a.eq.x)
+            if move > MAX_MOVE:  # checked before the corrector: a rejected prediction costs no solve
+                return None
         else:
             x_pred, w_pred = a.eq.x.copy(), a.eq.wrench.copy()
+            move = 0.0
         target = s * self.d
         eq = self.cont._solve_local(target, x_pred)
         if eq is None:
@@ -503,14 +529,17 @@ class _Tracer:
                 return None
             if not eq.converged:
                 return None
-        if self.scaled(x_pred - a.eq.x) > MAX_MOVE:
-            return None
         corr = self.scaled(eq.x - x_pred)
         if t is not None:
-            ok = corr <= CORRECTOR_RATIO * self.scaled(x_pred - a.eq.x) + 1e-9
+            ok = corr <= CORRECTOR_RATIO * move + 1e-9
         else:
             ok = corr <= 1e-2
-        return self.point(eq, s) if ok else None
+        if not ok:
+            return None
+        p = self.point(eq, s)
+        if t is not None:
+            p.hist = (a.s, t[0], t[1])
+        return p
 
     def reach(self, a: _BP, s: float) -> _BP | None:
         """``a``'s branch continued to ``s`` in adaptive sub-steps; None if it cannot be."""
@@ -608,7 +637,7 @@ class _Tracer:
         if depth >= DIP_DEPTH or q.s - p.s <= 4 * self.hmin:
             return None
         g0, g1 = self.dmu(p), self.dmu(q)
-        if not (np.isfinite(g0) and np.isfinite(g1)):
+        if not (math.isfinite(g0) and math.isfinite(g1)):
             return None
         both_neg = p.mu < 0 and q.mu < 0
         if not both_neg and not (p.mu >= 0 and q.mu >= 0):
@@ -740,7 +769,7 @@ class _Tracer:
             rem = s_end - cur.s
             h = min(h, rem)
             s_try = s_end if rem - h <= 1e-14 * self.range else cur.s + h
-            nxt = self.step(cur, s_try)
+            nxt = self.step(cur, s_try, True) if self.second_order else self.step(cur, s_try)
             if (
                 nxt is not None
                 and s_try - cur.s > FINE_STEP * self.range
