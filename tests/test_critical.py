@@ -9,7 +9,13 @@ Checked against code paths other than its own:
 - equilibria re-solved by the plain solver just before and after the critical deflection: the
   force-control margin (from the blocks with ``check_stability_held``) changes sign; the mode
   against an eigenvector computed here from SVD null spaces and ``reduced_matrix``;
-- bad input, no critical point, a search budget too small (reported, not hidden); the CLI.
+- bad input, no critical point, a search budget too small (reported, not hidden); the CLI;
+- the mechanism path (loop closures, dead loads, gravity, ``free``): ``trace_curve``'s first
+  critical point and closed forms: the portal frame's sway buckling ``F = 4k/h − 2P₀`` under dead
+  column loads ``P₀`` and ``4k/h − W`` under the beam's weight ``W`` (gravity), the four-bar's
+  limit point under two crank-tip pushes, the two-column parallel robot's in-plane and
+  out-of-plane buckling deflections (tests/test_parallel.py), the Orthoglide (re-solved
+  equilibria either side), a serial chain through the mechanism solver against the serial path.
 """
 
 from __future__ import annotations
@@ -23,6 +29,7 @@ from vjm_pin.analysis.critical import critical_load
 from vjm_pin.analysis.curve import trace_curve
 from vjm_pin.cli import main
 from vjm_pin.exceptions import InputError, NoCriticalPoint
+from vjm_pin.kinematics.dead_loads import STANDARD_GRAVITY, Load
 from vjm_pin.model.format import load_vjm
 from vjm_pin.model.registry import bundled_models, resolve_model
 from vjm_pin.model.subdivide import subdivide_model
@@ -210,11 +217,17 @@ def test_no_critical_point_and_bad_input():
             critical_load(vm, X, **kw)
     with pytest.raises(InputError, match="another model"):
         critical_load(vm, X, solver=EquilibriumSolver(resolve_model("paper-c-z")))
-    fb = resolve_model("four-bar")
-    with pytest.raises(InputError, match="serial chains"):
-        critical_load(fb, X)
-    with pytest.raises(InputError, match="EquilibriumSolver"):
-        critical_load(vm, X, solver=MechanismSolver(vm))
+    # the mechanism path's own checks
+    with pytest.raises(InputError, match="mechanism solver"):
+        critical_load(vm, X, solver=EquilibriumSolver(vm), loads=[Load(vm.frame, [0.0, 0.0, -1.0])])
+    with pytest.raises(InputError, match="not twice"):
+        critical_load(vm, X, solver=MechanismSolver(vm), gravity=(0.0, 0.0, -9.81))
+    with pytest.raises(InputError, match="another model"):
+        critical_load(vm, X, solver=MechanismSolver(resolve_model("paper-c-z")))
+    with pytest.raises(InputError, match="translation"):
+        critical_load(resolve_model("ur5"), [0, 0, 0, 0, 1, 0], free=True)
+    with pytest.raises(InputError, match="needs an EquilibriumSolver or a MechanismSolver"):
+        critical_load(vm, X, solver=object())
 
 
 def test_search_budget_too_small_is_reported_not_hidden():
@@ -256,7 +269,45 @@ def test_cli_json_and_text(capsys):
         (["critical", "paper-c-s", "--direction", "0", "0", "0"], 2, "must not be zero"),
         (["critical", "paper-c-s", "--direction", "-1", "0", "0", "--rtol", "1"], 2, "--rtol"),
         (["critical", "no-such-model", "--direction", "-1", "0", "0"], 2, "unknown model"),
-        (["critical", "four-bar", "--direction", "-1", "0", "0"], 2, "serial chains"),
+        (
+            [
+                "critical",
+                "four-bar",
+                "--direction",
+                "-1",
+                "0",
+                "0",
+                "--load",
+                "nowhere",
+                "0",
+                "0",
+                "1",
+            ],
+            2,
+            "nowhere",
+        ),
+        (
+            [
+                "critical",
+                "four-bar",
+                "--direction",
+                "-1",
+                "0",
+                "0",
+                "--load",
+                "coupler_link",
+                "0",
+                "1",
+            ],
+            2,
+            "got 2 numbers",
+        ),
+        (
+            ["critical", "ur5", "--direction", "0", "0", "0", "0", "1", "0", "--free"],
+            2,
+            "translation",
+        ),
+        (["critical", "portal-frame", "--direction", "1", "0", "0"], 3, "stays stable"),
         (["critical", "paper-a-pi", "--direction", "-1", "0", "0"], 3, "no critical point"),
     ],
 )
@@ -264,3 +315,214 @@ def test_cli_errors_are_one_line(argv, status, needle, capsys):
     assert main(argv) == status
     err = capsys.readouterr().err.strip()
     assert err.startswith("vjm-pin: error:") and len(err.splitlines()) == 1 and needle in err
+
+
+# --------------------------------------------------------------------------- mechanisms
+def _agrees_with_trace_curve(r, curve, rel=1e-6):
+    """``r`` is ``curve``'s first critical point: force, deflection and kind."""
+    assert curve.critical, "trace_curve found no critical point"
+    cp = curve.critical[0]
+    assert r.converged and r.check(1e-6), r.message
+    assert r.kind == cp.kind
+    assert r.force == pytest.approx(cp.force, rel=rel)
+    assert r.deflection == pytest.approx(cp.deflection, rel=rel, abs=1e-12)
+    return cp
+
+
+@pytest.mark.parametrize("name", ["portal-frame", "portal-frame-6"])
+@pytest.mark.parametrize("components,free", [("z", False), ("x z", True)])
+def test_portal_sway_buckling_closed_form_with_dead_loads(tmp_path, name, components, free):
+    """Vertical push on the beam's middle plus dead loads ``P₀`` on each column top: the sway
+    buckling of ``P₀ + F/2 = 2k/h`` per column (tests/portal_frame.py) at ``F = 4k/h − 2P₀``, a rigid
+    start (zero deflection); the dead load moves it, and trace_curve reports the same point."""
+    from . import portal_frame as pf
+    from .test_curve_mechanism import HEIGHT, K, column_loads, portal_with_task
+
+    vm = portal_with_task(tmp_path, name, components)
+    forces = []
+    for ratio in (0.0, 0.5):
+        p0 = ratio * pf.critical_load(K, HEIGHT)
+        loads = column_loads(p0)
+        r = critical_load(vm, [0, 0, -1], loads=loads, free=free)
+        assert r.kind == "bifurcation" and r.deflection == 0.0
+        assert r.force == pytest.approx(4 * K / HEIGHT - 2 * p0, rel=1e-8)
+        assert r.stiffness == np.inf and abs(r.margin) <= 1e-6 * K
+        _agrees_with_trace_curve(
+            r, trace_curve(vm, [0, 0, -1], 0.3, 3, loads=loads, free=free), 1e-10
+        )
+        # the mode is the sway: the four corner springs turn by ±φ (equal magnitudes)
+        corners = [vm.joint_index(j) for j in ("corner_bl", "corner_tl", "corner_tr", "corner_br")]
+        m = np.abs(r.mode[corners])
+        assert m.min() > 0.2 and np.ptp(m) <= 1e-6 * m.max()
+        forces.append(r.force)
+    assert forces[1] < forces[0]  # the dead load moved the critical point
+
+
+def test_portal_sway_buckling_under_gravity_closed_form(tmp_path):
+    """The portal frame with a mass M on the beam (``--gravity``: its weight W = Mg acts at its
+    centre of mass, which moves with the translating beam): the push buckles it at
+    ``F = 4k/h − W``, as trace_curve finds; without gravity at ``4k/h``."""
+    from .test_curve_mechanism import HEIGHT, MODELS, K
+
+    mass = 5.0
+    text = (MODELS / "portal-frame.urdf").read_text()
+    text = text.replace(
+        '<vjm:task frame="top" components="x" />', '<vjm:task frame="top" components="z" />'
+    )
+    inertial = (
+        f'<link name="beam"><inertial><origin xyz="0.3 0 0.1"/><mass value="{mass}"/>'
+        '<inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial></link>'
+    )
+    assert '<link name="beam" />' in text
+    path = tmp_path / "portal-mass.urdf"
+    path.write_text(text.replace('<link name="beam" />', inertial))
+    vm = load_vjm(path)
+    g = (0.0, 0.0, -STANDARD_GRAVITY)
+    r = critical_load(vm, [0, 0, -1], gravity=g)
+    assert r.force == pytest.approx(4 * K / HEIGHT - mass * STANDARD_GRAVITY, rel=1e-8)
+    _agrees_with_trace_curve(r, trace_curve(vm, [0, 0, -1], 0.3, 3, gravity=g), 1e-10)
+    assert critical_load(vm, [0, 0, -1]).force == pytest.approx(4 * K / HEIGHT, rel=1e-8)
+
+
+def test_four_bar_limit_point_moves_with_the_dead_load():
+    """A dead push on the four-bar's crank tip (tests/test_mechanism.py) softens the linkage
+    pulled along −x until the force peaks (a limit point at a finite deflection): for two pushes
+    critical_load and trace_curve agree to their tolerance, the point moves with the push, and
+    the force of equilibria re-solved by MechanismSolver on both sides is lower (a maximum)."""
+    from .test_mechanism import FOUR_BAR, crank_tip_push, pin_placement
+
+    k = float(FOUR_BAR.K_theta[list(FOUR_BAR.theta_idx).index(FOUR_BAR.joint_index("crank"))].max())
+    tip = pin_placement(FOUR_BAR, FOUR_BAR.reference, "coupler_link")[0]
+    d = np.array([-1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    found = []
+    for ratio in (0.9, 0.8):
+        loads = [crank_tip_push(ratio * k / np.linalg.norm(tip))]
+        r = critical_load(FOUR_BAR, d, loads=loads)
+        cp = _agrees_with_trace_curve(r, trace_curve(FOUR_BAR, d, 0.05, 8, loads=loads), 1e-6)
+        assert (
+            r.kind == "limit"
+            and r.deflection > 0
+            and abs(r.stiffness) < 1e-3 * abs(cp.stiffness_before) + 1e-9 * k
+        )
+        ms = MechanismSolver(FOUR_BAR, loads)
+        at = ms.solve(deflection=(r.deflection * d)[[0, 2]])
+        assert d @ at.wrench == pytest.approx(r.force, rel=1e-7)
+        for ds in (-2e-3, 2e-3):
+            side = ms.solve(deflection=((r.deflection + ds) * d)[[0, 2]], x0=at.x)
+            assert d @ side.wrench < r.force
+        found.append(r)
+    assert abs(found[0].deflection - found[1].deflection) > 1e-3 * found[0].deflection
+
+
+@pytest.mark.parametrize("free", [False, True])
+def test_two_column_parallel_robot_buckling_closed_form(free):
+    """The two-column parallel robot of tests/test_parallel.py pushed along −x: held across x,
+    column A buckles in plane at the root δ_c of its closed-form margin; free across x, the
+    platform sways out of plane first, where ``k_r/(L−δ)² + k_r/L² − k_a δ/(L−δ)`` vanishes.
+    The force is the axial ``k_a δ_c`` (to the bending springs' share) and trace_curve agrees."""
+    from scipy.optimize import brentq
+
+    from .parallel_models import columns_xml
+    from .test_parallel import _in_plane
+
+    length, kr, ka = 1.0, 100.0, 1e5
+
+    def sway(dd):
+        return kr / (length - dd) ** 2 + kr / length**2 - ka * dd / (length - dd)
+
+    d_c = brentq(sway if free else _in_plane, 0.0, 0.2, xtol=1e-15)
+    vm = load_vjm(columns_xml(length, kr, ka))
+    r = critical_load(vm, [-1, 0, 0], free=free)
+    assert r.kind == "bifurcation"
+    assert r.deflection == pytest.approx(d_c, rel=1e-6)
+    assert r.force == pytest.approx(ka * d_c, rel=1e-3)
+    curve = trace_curve(vm, [-1, 0, 0], 3.4e-3 if free else 7e-3, 7, free=free)
+    _agrees_with_trace_curve(r, curve, 1e-6)
+    # the buckling mode is column A's (held: in plane) with B's joints at rest to round-off
+    legs = {lg.name: [vm.joint_index(j) for j in lg.joints] for lg in vm.legs}
+    if not free:
+        assert np.abs(r.mode[legs["B"]]).max() < 1e-6 * np.abs(r.mode[legs["A"]]).max()
+
+
+def test_serial_chain_through_the_mechanism_solver_is_the_serial_result():
+    """The same chain and direction through MechanismSolver (the mechanism path) and through the
+    serial path: the same critical point; a dead force ``G`` at the end along the direction
+    shifts the external force by ``−G`` and leaves the deflection."""
+    vm = resolve_model("paper-c-s")
+    a = critical_load(vm, X)
+    b = critical_load(vm, X, solver=MechanismSolver(vm))
+    assert b.converged and b.kind == a.kind == "bifurcation"
+    assert b.force == pytest.approx(a.force, rel=1e-6)
+    assert b.deflection == pytest.approx(a.deflection, rel=1e-6)
+    g = 0.05
+    c = critical_load(vm, X, loads=[Load(vm.frame, g * np.array(X))])
+    assert c.deflection == pytest.approx(a.deflection, rel=1e-6)
+    assert c.force == pytest.approx(a.force - g, rel=1e-6)
+
+
+def test_mechanism_search_budget_too_small_is_reported_not_hidden():
+    from .test_mechanism import FOUR_BAR, crank_tip_push, pin_placement
+
+    k = float(FOUR_BAR.K_theta[list(FOUR_BAR.theta_idx).index(FOUR_BAR.joint_index("crank"))].max())
+    tip = pin_placement(FOUR_BAR, FOUR_BAR.reference, "coupler_link")[0]
+    loads = [crank_tip_push(0.9 * k / np.linalg.norm(tip))]
+    full = critical_load(FOUR_BAR, X, loads=loads)
+    short = critical_load(FOUR_BAR, X, loads=loads, max_iter=2)
+    assert full.converged and full.check()
+    assert not short.converged and not short.check() and short.message
+    assert short.iterations <= 2
+    assert abs(short.force / full.force - 1) > 1e-6
+
+
+def test_cli_mechanism_loads_json_and_text(capsys):
+    """--load on a closed-loop model: the JSON (SI, the schema) is critical_load's answer and
+    lists the dead load; the text names it."""
+    from .test_mechanism import FOUR_BAR, crank_tip_push, pin_placement
+
+    k = float(FOUR_BAR.K_theta[list(FOUR_BAR.theta_idx).index(FOUR_BAR.joint_index("crank"))].max())
+    tip = pin_placement(FOUR_BAR, FOUR_BAR.reference, "coupler_link")[0]
+    ld = crank_tip_push(0.9 * k / np.linalg.norm(tip))
+    words = [repr(float(v)) for v in ld.wrench[:3]]
+    argv = ["critical", "four-bar", "--direction", "-1", "0", "0", "--load", ld.frame, *words]
+    assert main([*argv, "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)  # validated against the schema by conftest
+    r = critical_load(resolve_model("four-bar"), X, loads=[ld])
+    assert (
+        out["kind"] == "limit"
+        and out["converged"]
+        and out["free"] is False
+        and out["gravity"] is False
+    )
+    assert out["force"] == pytest.approx(r.force, rel=1e-12)
+    assert out["loads"][0]["frame"] == ld.frame
+    assert out["loads"][0]["wrench"] == pytest.approx(list(ld.wrench), rel=1e-12)
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert "limit" in text and "dead load at 'coupler_link'" in text
+    assert (
+        main(["critical", "paper-c-s", "--direction", "-1", "0", "0", "--gravity", "--json"]) == 0
+    )
+    out = json.loads(capsys.readouterr().out)
+    assert out["gravity"] is True and out["converged"]
+
+
+def test_orthoglide_agrees_with_trace_curve():
+    """The bundled Orthoglide (three legs, closures at the platform) pushed along −x: the first
+    critical point of trace_curve; a bifurcation: the equilibria re-solved by a plain
+    MechanismSolver (no stable-branch following) 1 % before and after it are stable and unstable
+    with the platform held (eq. 23 with the closures, the solver's own verdict), and the force
+    along the path passes through the critical force there."""
+    vm = resolve_model("orthoglide-q0")
+    r = critical_load(vm, X)
+    _agrees_with_trace_curve(r, trace_curve(vm, X, 3e-3, 6), 1e-6)
+    assert r.kind == "bifurcation" and r.deflection > 0
+    assert np.linalg.norm(r.mode) == pytest.approx(1.0, rel=1e-12)
+    ms = MechanismSolver(vm, follow_stable=False)
+    side = {}
+    for f in (0.99, 1.01):
+        e = ms.solve(deflection=(f * r.deflection * r.direction)[:3], x0=r.x)
+        assert e.converged
+        side[f] = e
+    assert side[0.99].stable_end_held and not side[1.01].stable_end_held
+    forces = [r.direction @ side[f].wrench for f in (0.99, 1.01)]
+    assert forces[0] < r.force < forces[1]

@@ -1,7 +1,8 @@
 """The critical load along a direction, directly: "at what load does it buckle?".
 
-:func:`critical_load` returns the first critical point of the loading path of a serial chain
-along a task direction ``d`` without tracing the whole curve. It is the first critical point
+:func:`critical_load` returns the first critical point of the loading path of a model along a
+task direction ``d`` without tracing the whole curve: serial chains, and (see "Mechanisms" below)
+closed loops, parallel robots, dead loads anywhere, gravity and a free end. It is the first critical point
 that :func:`~vjm_pin.analysis.curve.trace_curve` reports on the same path: the same followed
 branch (the end moved along ``d``, every task component held, eq. 5), the same measure and the
 same rule, evaluated by the tracer's own code (:class:`~vjm_pin.analysis.curve._Tracer`):
@@ -32,7 +33,11 @@ Method
    reached by the tracer's continuation (tangent predictor, Newton corrector, continuity check)
    from the nearer end of the current bracket; a step that leaves the bracket is replaced by
    the secant point of the bracket; without a bracket yet the step at most quadruples the
-   deflection. Between the points of the
+   deflection. A loss of stability is trusted only over a fine step (the tracer's rule in
+   :meth:`_Tracer.advance`: a long predictor step may jump across a knee onto a neighbouring
+   branch); until then the bracket is approached from its stable end alone (half a fine step
+   short of the root estimate, halving after an untrusted step or a stalled margin: an
+   imperfect maximum ahead, :meth:`_Search.root`). Between the points of the
    followed branch the tracer's cubic model of ``μ`` (:meth:`_Tracer.first_event`) checks that
    no earlier crossing (or imperfect minimum of the margin) hides.
 4. Converged when one more Newton step would move the force by less than ``rtol`` (relative),
@@ -41,13 +46,28 @@ Method
 
 The buckling mode is the unit eigenvector of the critical matrix at the critical point: eq. (23)
 (end held) at a bifurcation, the force-control matrix (``μ``'s) at a limit or imperfect point,
-by inverse iteration (one Cholesky). Models with loop closures, dead loads or gravity are
-refused with an :class:`~vjm_pin.exceptions.InputError` (``trace_curve`` handles them: the
-mechanism path of this search is not written).
+by inverse iteration (one Cholesky).
+
+Mechanisms
+----------
+Models with loop closures, dead loads, gravity, ``free=True`` or a
+:class:`~vjm_pin.solver.mechanism.MechanismSolver` as ``solver`` take the same search on the
+mechanism tracer of ``trace_curve`` (:class:`~vjm_pin.analysis.mechanism_curve.MechanismTracer`,
+the same dispatch and critical-point rule): ``μ`` on the null space of the closure rows and the
+held rows orthogonal to ``d`` with the Lagrangian Hessian ``W`` (dead loads, closure multipliers),
+the bordered tangent of eq. (28), ``dμ/ds`` by the tracer's difference along it. Step 2 freezes
+the start's geometry under an added dead force along ``d`` (the closures and held rows reacting by
+least squares, :meth:`MechanismTracer.force_control_lin`): ``W`` is linear in it, the same
+generalized eigenproblem (:func:`linearised_load_mechanism`); the estimate is the smaller of that
+and one Newton step on ``μ`` from the start (``dμ/ds`` by the tracer's difference). A
+start rigid along ``d`` is searched along the force at the start (:meth:`MechanismTracer.rigid_start`).
+The mode at a bifurcation is the critical eigenvector of the control as run (every task row held;
+only ``d`` with ``free``).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -64,12 +84,15 @@ from vjm_pin.analysis.curve import (
     _Tracer,
     _unloaded,
 )
+from vjm_pin.analysis.mechanism_curve import MechanismTracer, check_free_direction
 from vjm_pin.exceptions import InputError, NoCriticalPoint
+from vjm_pin.kinematics.dead_loads import Load
 from vjm_pin.model.format import VjmModel
 from vjm_pin.model.task import task_vector
 from vjm_pin.solver.equilibrium import EquilibriumResult, EquilibriumSolver
 from vjm_pin.solver.lapack import lapack as _lapack
 from vjm_pin.solver.lapack import solve_triangular
+from vjm_pin.solver.mechanism import MechanismSolver, _null_basis
 from vjm_pin.solver.stability import (
     check_stability,
     check_stability_held,
@@ -96,7 +119,7 @@ class CriticalLoad:
     Attributes:
         force: Critical load (N; N·m along a rotational direction): ``dᵀF``, the external force
             along the direction that holds the end there (positive when it pushes the end
-            along the direction).
+            along the direction); dead loads are not included.
         deflection: Critical deflection ``s`` along the direction (m, or rad).
         direction: (6,) unit direction, world axes (translation, rotation).
         wrench: (6,) external wrench at the critical point (N, N·m), world axes.
@@ -107,7 +130,7 @@ class CriticalLoad:
             elsewhere; largest component positive) of the critical eigenvalue (eq. 23 at a
             bifurcation, the force-control matrix otherwise), rad and m per unit.
         margin: ``μ`` at the critical point (N·m/rad for spring coordinates), ≈ 0 (``−μ`` is
-            ``CurvePoint.force_control_margin``).
+            ``CurvePoint.force_control_margin``); at a rigid start, ``μ`` at the critical force.
         margin_rate: ``dμ/ds`` there (per m, or per rad); nan when not available.
         stiffness: Tangent stiffness ``dᵀK_C d`` (N/m, N·m/rad) at the critical point (eq. 30).
         estimate: Linearised critical load (N, N·m): the start of the search (nan without one).
@@ -119,7 +142,9 @@ class CriticalLoad:
             force, or of the deflection where larger: ``|μ/μ'|·max(|k|, |F/s|)/|F|``; the
             bracket width where ``μ'`` is not available; 0 for an imperfect point, an extremum
             located by the tracer's search), ``margin``: ``|μ|/‖K_θ‖₂``, and the equilibrium's
-            own residuals ``position`` (m), ``orientation`` (rad), ``statics`` (N·m).
+            own residuals ``position`` (m), ``orientation`` (rad), ``statics`` (N·m) (a
+            mechanism's also ``closure_position``, ``closure_orientation``,
+            ``statics_prismatic``: :class:`~vjm_pin.solver.mechanism.MechanismResult`).
         equilibrium: The :class:`~vjm_pin.solver.EquilibriumResult` at the critical point.
         message: Why it did not converge ("" when it did).
     """
@@ -244,6 +269,8 @@ def linearised_load(tr: _Tracer, p0) -> float | None:
 def _mode(tr: _Tracer, c, held: bool) -> np.ndarray:
     """The buckling mode (nq,) at the point ``c``: the critical eigenvector of eq. (23)
     (``held``) or of the force-control matrix (its eigenvalue is ``c.mu``, the largest)."""
+    if isinstance(tr, MechanismTracer):
+        return _mode_mechanism(tr, c, held)
     b = tr.blocks(c.eq.x, c.eq.wrench)
     z, v = _basis(tr, b)
     basis = z if held and z.shape[1] else v
@@ -258,6 +285,108 @@ def _mode(tr: _Tracer, c, held: bool) -> np.ndarray:
     i = int(np.argmax(np.abs(w)))
     out[tr.free] = w if w[i] >= 0 else -w
     return out
+
+
+def _mode_mechanism(tr, c, held: bool) -> np.ndarray:
+    """:func:`_mode` on the mechanism tracer: the top eigenvector of ``−ZᵀWZ`` (``W`` the
+    Lagrangian Hessian of :class:`~vjm_pin.solver.mechanism.Linearization`), ``Z`` the null space
+    of the closure rows and the held task rows (``held``: eq. 23 generalised, the control as
+    run, the tracer's ``λ``: only ``d`` with ``free``) or of the closure rows and the held rows
+    orthogonal to ``d`` (``μ``'s)."""
+    lin = getattr(c, "lin", None)
+    if lin is None:
+        lin = tr.run.linearize(c.eq.x, tr.hrows, tr.wdead)
+    rows = tr.held6 if held else tr.p_rows
+    z, _ = _null_basis(
+        np.vstack([lin.closure_jacobian, rows @ lin.task_jacobian]), tr.run.rank_rtol
+    )
+    out = np.zeros_like(c.eq.x)
+    if z.shape[1] == 0:
+        return out
+    red = -(z.T @ lin.hessian @ z)
+    u = np.linalg.eigh(_sym(red))[1][:, -1]
+    w = z @ u
+    w /= np.linalg.norm(w)
+    i = int(np.argmax(np.abs(w)))
+    out[tr.free] = w if w[i] >= 0 else -w
+    return out
+
+
+def linearised_load_mechanism(tr, p0) -> float | None:
+    """Step 2 on the mechanism tracer: the increment ``ΔF`` (N, N·m) of a dead force along ``d``
+    (the held axes orthogonal to ``d`` and the closures reacting, their multipliers by least
+    squares from the stationarity as :meth:`~vjm_pin.solver.mechanism.MechanismSolver.linearize`
+    takes them) at which ``μ`` of the frozen geometry of ``p0`` reaches zero. ``W`` is linear in
+    that force (``W = W₀ + ΔF·W₁``, ``W₁`` by the difference of two linearisations at the same
+    ``x``), so the root is ``1/ν_max`` of ``−ZᵀW₁Z y = ν ZᵀW₀Z y`` on the null space ``Z`` of
+    ``[C; P J]``; None without a positive root (or with ``free``: nothing held but ``d``'s force)."""
+    x, f0 = p0.eq.x, float(p0.force)
+    try:
+        lin0 = tr.force_control_lin(x, f0)
+        lin1 = tr.force_control_lin(x, f0 + 1.0)
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    c, j = lin0.closure_jacobian, lin0.task_jacobian
+    z, _ = _null_basis(np.vstack([c, tr.p_rows @ j]), tr.run.rank_rtol)
+    if z.shape[1] == 0:
+        return None
+    a = _sym(z.T @ lin0.hessian @ z)
+    bm = -_sym(z.T @ (lin1.hessian - lin0.hessian) @ z)
+    lo, info = _lapack.dpotrf(a, lower=1)
+    if info:
+        return None
+    try:
+        y = solve_triangular(lo, bm, lower=True)
+        cm = solve_triangular(lo, y.T.copy(), lower=True)
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    nu = float(np.linalg.eigvalsh(_sym(cm))[-1])
+    return 1.0 / nu if nu > 0 and np.isfinite(nu) else None
+
+
+def _critical_mechanism(vm, d, solver, max_deflection, rtol, max_iter, loads, gravity, free):
+    """:func:`critical_load` on :class:`~vjm_pin.solver.mechanism.MechanismSolver` and the
+    mechanism tracer of :func:`~vjm_pin.analysis.curve.trace_curve`
+    (:class:`~vjm_pin.analysis.mechanism_curve.MechanismTracer`): loop closures, dead loads
+    anywhere, gravity, ``free``."""
+    if free:
+        check_free_direction(d)
+    if solver is None:
+        solver = MechanismSolver(vm, loads=loads, gravity=gravity)
+    elif not isinstance(solver, MechanismSolver):
+        raise InputError(
+            "this model needs the mechanism solver (loop closures, dead loads or a free task "
+            "frame): pass a MechanismSolver as solver, or none"
+        )
+    elif loads or gravity is not None:
+        raise InputError(
+            "give the dead loads and gravity to the MechanismSolver passed as solver, not twice"
+        )
+    if solver.vm is not vm:
+        raise InputError("the solver was built for another model")
+    rotation = bool(np.any(d[3:]))
+    r0 = max_deflection or (1.0 if rotation else solver.length_scale)
+    tr = MechanismTracer(vm, d, r0, solver, 1e3 * rtol, free)
+    p0, rigid = tr.start()
+    if rigid or not np.isfinite(p0.k):
+        return _rigid(vm, tr, p0, d)
+    if p0.mu >= 0:
+        raise NoCriticalPoint(
+            "the start (the loaded equilibrium at zero deflection) is already unstable under a "
+            f"force along the direction (force-control margin {-p0.mu:.3g}): no critical point "
+            "to approach",
+            max_deflection=0.0,
+        )
+    # the smaller of the frozen-geometry estimate and one Newton step on μ from the start (the
+    # least-squares reactions of the former overestimate where the load shares by compliance:
+    # 1.8× on the two-column robot; the latter where μ curves: 2.6× on Model C S)
+    est = [linearised_load_mechanism(tr, p0)]
+    g = tr.dmu(p0)
+    if np.isfinite(g) and g > 0 and p0.k > 0:
+        est.append(-p0.mu / g * p0.k)
+    est = [e for e in est if e is not None and np.isfinite(e) and e > 0]
+    df = min(est) if est and p0.k > 0 else None  # a falling start: no estimate (as serial)
+    return _search_from(vm, tr, p0, df, max_deflection, r0, rtol, max_iter)
 
 
 def _scan(tr: _Tracer, lo, q, depth: int = 0):
@@ -327,17 +456,29 @@ class _Search:
             else self.tr.reach(base, s)
         )
 
-    def done(self, p, lo, hi) -> bool:
+    def consistent(self, lo, m) -> bool:
+        """Whether ``m`` (``μ ≥ 0``, reached from ``lo`` with ``μ < 0``) is trusted to lie on
+        ``lo``'s branch: the tracer accepts a loss of stability only over a fine step
+        (:data:`~vjm_pin.analysis.curve.FINE_STEP` of the range; a longer step may have jumped
+        across a knee onto a neighbouring branch, next to an imperfect bifurcation, where the
+        straight branch the predictor follows crosses zero), so ``m`` is trusted when that close
+        to ``lo``."""
+        return m.s - lo.s <= FINE_STEP * self.s_max
+
+    def done(self, p, lo, hi, hi_ok: bool = True) -> bool:
         """The tracer's stopping rule (the bracket, or one more Newton step, moves the force by
         at most rtol relative), and the deflection to rtol relative as well (at a limit point
-        the force is flat: ``k → 0``)."""
+        the force is flat: ``k → 0``); a bracket end ``hi`` not trusted to lie on the branch
+        (``hi_ok`` False, :meth:`consistent`) ends nothing."""
+        if p is hi and not hi_ok:
+            return False
         f = max(abs(p.force), 1e-300)
         k = max(abs(p.k) if np.isfinite(p.k) else 0.0, f / max(abs(p.s), 1e-300))
         g = self.rate(p)
         if np.isfinite(g) and abs(p.mu / g) * k <= self.rtol * f:
             self.location = abs(p.mu / g) * k / f
             return True
-        if hi is not None:
+        if hi is not None and hi_ok:
             kk = max(abs(lo.k), abs(hi.k)) if np.isfinite(lo.k) and np.isfinite(hi.k) else 0.0
             kk = max(kk, f / max(abs(p.s), 1e-300))
             w = hi.s - lo.s
@@ -384,13 +525,31 @@ class _Search:
         at the root (with a message when the budget ran out first), an earlier event
         ``(kind, a, b)`` found inside the bracket, or None (no equilibrium; message set)."""
         tr = self.tr
-        p = hi if abs(hi.mu) < abs(lo.mu) else lo
-        if self.done(p, lo, hi):
+        hi_ok = self.consistent(lo, hi)
+        p = hi if abs(hi.mu) < abs(lo.mu) and hi_ok else lo
+        if self.done(p, lo, hi, hi_ok):
             return p
-        flo, fhi, side = lo.mu, hi.mu, 0
+        flo, fhi, side, rejected, stalled, prev = lo.mu, hi.mu, 0, False, False, None
         while self.n < self.max_iter:
-            s = _newton_point(p, self.rate(p), lo, hi, flo, fhi)
-            base = lo if s - lo.s <= hi.s - s else hi
+            if hi_ok:
+                s = _newton_point(p, self.rate(p), lo, hi, flo, fhi)
+                base = lo if s - lo.s <= hi.s - s else hi
+            else:
+                # hi may lie on another branch: approach the root from lo alone (the nearer of
+                # Newton from lo and the secant point), aiming half a fine step short of it until
+                # a fine step remains; halving the bracket after a step that was not trusted
+                fine = FINE_STEP * self.s_max
+                s = lo.s + lo.mu / (lo.mu - hi.mu) * (hi.s - lo.s)
+                sn = _newton_point(lo, self.rate(lo), lo, None, lo.mu, None)
+                if np.isfinite(sn):
+                    s = min(s, sn)
+                if rejected:
+                    s = 0.5 * (lo.s + hi.s)
+                elif stalled:
+                    s = _past_peak(lo, self.rate(lo), prev, self.rate(prev), hi, self.tr.hmin)
+                elif s - lo.s > fine:
+                    s = max(0.5 * (lo.s + s), s - 0.5 * fine)
+                base = lo
             m = self.evaluate(base, s)
             if m is None:
                 self.message = (
@@ -399,18 +558,35 @@ class _Search:
                 return None
             if m.mu < 0:
                 ev = tr.first_event(lo, m) if m.s > lo.s else None
-                if ev is not None and ev[2] is not m:  # an earlier event between lo and m
+                if ev is not None:  # an earlier event between lo and m (a crossing or a maximum)
                     return ev
-                lo, flo = m, m.mu
+                # without a trusted hi, a margin that fell by less than half (μ flattening
+                # below zero: an imperfect maximum ahead) steps just past the maximum next
+                stalled, rejected = not hi_ok and m.mu < 0.5 * lo.mu, False
+                prev, lo, flo = lo, m, m.mu
                 fhi, side = (0.5 * fhi if side == -1 else fhi), -1  # Illinois: no stalled end
+                hi_ok = hi_ok or self.consistent(lo, hi)
             else:
-                hi, fhi = m, m.mu
+                ok = hi_ok if base is hi else self.consistent(lo, m)
+                hi, fhi, hi_ok, rejected, stalled = m, m.mu, ok, not ok, False
                 flo, side = (0.5 * flo if side == 1 else flo), 1
             p = self.best = m
-            if self.done(m, lo, hi):
+            if self.done(m, lo, hi, hi_ok):
                 return m
         self.message = f"the critical point was not located to rtol={self.rtol:g} in {self.max_iter} evaluations"
         return p
+
+
+def _past_peak(lo, g_lo, prev, g_prev, hi, hmin) -> float:
+    """The next trial when ``μ`` stalls below zero between ``prev`` and ``lo`` (an imperfect
+    maximum ahead): twice the distance from ``lo`` to the maximum of ``μ`` where its rate,
+    linear between the two points, vanishes (so that the interval from ``lo`` holds the maximum
+    and stays short); the bracket's midpoint without such an estimate, or past it."""
+    mid = 0.5 * (lo.s + hi.s)
+    if prev is None or not (np.isfinite(g_lo) and np.isfinite(g_prev)) or not g_prev > g_lo > 0:
+        return mid
+    peak = lo.s + g_lo * (lo.s - prev.s) / (g_prev - g_lo)
+    return min(max(lo.s + 2.0 * (peak - lo.s), lo.s + hmin), mid)
 
 
 def _start(vm, tr: _Tracer, solver: EquilibriumSolver, d: np.ndarray):
@@ -455,35 +631,43 @@ def critical_load(
     max_deflection: float | None = None,
     rtol: float = RTOL,
     max_iter: int = MAX_ITER,
+    loads: Sequence[Load] = (),
+    gravity=None,
+    free: bool = False,
 ) -> CriticalLoad:
     """The first critical load of ``vm`` along ``direction`` (module docstring), directly.
 
     Args:
-        vm: The model (a serial chain without closures).
+        vm: The model: a serial chain, or any model ``trace_curve`` takes (loop closures,
+            parallel robots).
         direction: (3,) or (6,) direction of the end deflection, world axes
             (:func:`~vjm_pin.model.task.task_vector`); normalised; in the task components, a
             pure translation or rotation.
-        solver: The :class:`~vjm_pin.solver.EquilibriumSolver` to use (default a new one).
+        solver: The :class:`~vjm_pin.solver.EquilibriumSolver` (serial chains) or
+            :class:`~vjm_pin.solver.mechanism.MechanismSolver` (with its own dead loads and
+            gravity) to use; default a new one, as ``trace_curve`` picks it.
         max_deflection: Search the path up to this deflection (m or rad); default
             :data:`RANGE_FACTOR` × the linearised estimate (or :data:`RANGE_NO_ESTIMATE` × the
             chain length, 1 rad along a rotation, without one).
         rtol: Relative force tolerance of the location (default 1e-7, as ``trace_curve``).
         max_iter: Largest number of equilibrium evaluations of the search.
+        loads: Dead loads anywhere (:class:`~vjm_pin.kinematics.dead_loads.Load`, world axes),
+            constant along the path, as ``trace_curve``'s.
+        gravity: (3,) gravity (m/s²) for the link weights, or None.
+        free: Hold the end only along ``d`` (a translation): the other task components carry no
+            load (the free-platform path of a parallel robot), as ``trace_curve``'s.
 
     Returns:
         The :class:`CriticalLoad`; ``converged`` False (with ``message``) when the search did
         not meet its tolerance: the best point found is returned, not hidden.
 
     Raises:
-        InputError: bad direction, options, a model with closures or another solver.
+        InputError: bad direction or options, a solver of the wrong kind or for another model,
+            dead loads given both here and to the solver, ``free`` along a rotation.
         NoCriticalPoint: the followed branch stays stable under a force along the direction
             up to ``max_deflection``.
         NoEquilibrium: no unloaded equilibrium to start from.
     """
-    if getattr(vm, "closures", ()):
-        raise InputError(
-            "critical_load supports serial chains only (this model has loop closures): use trace_curve"
-        )
     if not (isinstance(rtol, (int, float)) and 1e-13 <= rtol <= 0.1):
         raise InputError(f"rtol must be a number from 1e-13 to 0.1, got {rtol!r}")
     if int(max_iter) != max_iter or max_iter < 1:
@@ -493,10 +677,21 @@ def critical_load(
             f"max_deflection must be a positive number (m or rad), got {max_deflection}"
         )
     d = _direction(vm, task_vector(direction, vm.task, "direction", "m or rad"))
+    if (
+        free
+        or loads
+        or gravity is not None
+        or getattr(vm, "closures", ())
+        or isinstance(solver, MechanismSolver)
+    ):
+        # the models trace_curve runs on the mechanism solver (the same dispatch)
+        return _critical_mechanism(
+            vm, d, solver, max_deflection, rtol, int(max_iter), loads, gravity, bool(free)
+        )
     if solver is None:
         solver = EquilibriumSolver(vm)
     elif not isinstance(solver, EquilibriumSolver):
-        raise InputError("critical_load needs an EquilibriumSolver (serial chains) as solver")
+        raise InputError("critical_load needs an EquilibriumSolver or a MechanismSolver as solver")
     if solver.vm is not vm:
         raise InputError("the solver was built for another model")
     rotation = bool(np.any(d[3:]))
@@ -513,7 +708,14 @@ def critical_load(
             f"(force-control margin {-p0.mu:.3g}): no critical point to approach",
             max_deflection=0.0,
         )
-    df = linearised_load(tr, p0)
+    return _search_from(vm, tr, p0, linearised_load(tr, p0), max_deflection, r0, rtol, max_iter)
+
+
+def _search_from(vm, tr, p0, df, max_deflection, r0, rtol, max_iter) -> CriticalLoad:
+    """Steps 3–4 of the module docstring from the start ``p0`` (``μ < 0``, finite stiffness)
+    with the load increment ``df`` of the linearised estimate (or None): serial and mechanism
+    tracers alike."""
+    rotation = bool(np.any(tr.d[3:]))
     s_est = p0.s + df / p0.k if df is not None else float("nan")
     if max_deflection is not None:
         s_max = float(max_deflection)
@@ -586,7 +788,11 @@ def _result(vm, tr, c, kind, df, p0, search, ok) -> CriticalLoad:
     eq = c.eq
     msg = search.message
     if getattr(eq, "path", "") == "tangent-prediction":  # re-solve the predicted point
-        sol = tr.cont._solve_local(c.s * tr.d, eq.x)
+        if isinstance(tr, MechanismTracer):
+            sol = tr.solve(c.s, eq.x, tr.cont)
+            sol = sol if sol.converged else None
+        else:
+            sol = tr.cont._solve_local(c.s * tr.d, eq.x)
         if sol is not None:
             c = tr.point(sol, c.s)
             eq = c.eq
@@ -642,8 +848,11 @@ def _rigid(vm, tr, p0, d) -> CriticalLoad:
         )
     f, u = found
     eq = u.eq
-    b = tr.blocks(eq.x, eq.wrench)
-    mu = _max_eig(check_stability_held(b, tr.P))
+    if isinstance(tr, MechanismTracer):
+        mu = float(u.mu)  # μ of the loaded reference (force_control_lin at f)
+    else:
+        b = tr.blocks(eq.x, eq.wrench)
+        mu = _max_eig(check_stability_held(b, tr.P))
     scale = spectral_norm(vm.K_theta) if vm.K_theta.size else 1.0
 
     res = {

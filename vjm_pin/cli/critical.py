@@ -2,12 +2,18 @@
 
 from __future__ import annotations
 
-from vjm_pin.cli.common import MAX_SUBDIVIDE, float_range, int_range, positive_float
+from vjm_pin.cli.common import (
+    MAX_SUBDIVIDE,
+    add_load_option,
+    float_range,
+    int_range,
+    positive_float,
+)
 
 EXAMPLES = (
     "vjm-pin critical paper-c-s --direction -1 0 0",
     "vjm-pin critical paper-c-s --direction -1 0 0 --subdivide 4 --json",
-    "vjm-pin critical paper-a-z --direction -1 0 0 --rtol 1e-9",
+    "vjm-pin critical four-bar --direction -1 0 0 --load coupler_link -163 0 -419.4",
 )
 
 #: Accepted ``--rtol`` (relative force tolerance of the location).
@@ -25,7 +31,11 @@ UNITS = {
     "margin_rate": "margin per m (per rad along a rotational direction)",
     "stiffness": "N/m (N·m/rad along a rotational direction)",
     "estimate": "N (N·m along a rotational direction)",
-    "residuals": "location and margin: 1 (relative); position: m; orientation: rad; statics: N·m",
+    "residuals": (
+        "location and margin: 1 (relative); position, closure_position: m; orientation, "
+        "closure_orientation: rad; statics: N·m; statics_prismatic: N"
+    ),
+    "loads": "N (moment components: N·m), world axes, force at the frame origin",
 }
 
 
@@ -40,8 +50,10 @@ def add_parser(sub):
             "force-control stability margin with warm-started equilibria. It is the first critical "
             "point that 'vjm-pin curve' reports on the same path (same definition and kind: "
             "'bifurcation' where the straight branch loses eq. 23 with the force still rising, "
-            "'limit' at a force maximum, 'imperfect' at a sharp near-loss). Serial chains without dead "
-            "loads. Units: the text prints the load in N (mN below 1 N) and the deflection in mm (or rad "
+            "'limit' at a force maximum, 'imperfect' at a sharp near-loss). Every model the curve "
+            "command takes: serial chains, closed loops and parallel robots; --load and --gravity add "
+            "dead loads anywhere, kept constant along the path; --free holds only the component along "
+            "DIRECTION. Units: the text prints the load in N (mN below 1 N) and the deflection in mm (or rad "
             "and N·m for a rotational direction); --json is SI (m, rad, N, N·m). Exit status 3 when "
             "there is no critical point up to --max-deflection or the search does not converge."
         ),
@@ -78,6 +90,18 @@ def add_parser(sub):
         help=f"split every beam link into K sub-links (models whose springs keep <vjm:beam>; K from 1 to {MAX_SUBDIVIDE})",
     )
     p.add_argument(
+        "--free",
+        action="store_true",
+        help="hold only the component along DIRECTION: the end (a parallel robot's platform) is free "
+        "across it, with no load there (default: every task component held)",
+    )
+    p.add_argument(
+        "--gravity",
+        action="store_true",
+        help="load every link with its weight at its centre of mass (URDF inertials; 9.80665 m/s² along −z)",
+    )
+    add_load_option(p)
+    p.add_argument(
         "--json",
         action="store_true",
         help="one JSON object on stdout, SI units (see 'vjm-pin schema critical')",
@@ -85,11 +109,15 @@ def add_parser(sub):
     p.set_defaults(func=run)
 
 
-def critical_dict(vm, r) -> dict:
-    """The ``critical --json`` body of the :class:`~vjm_pin.analysis.critical.CriticalLoad` ``r``."""
+def critical_dict(vm, r, *, free=False, gravity=None, load_list=None) -> dict:
+    """The ``critical --json`` body of the :class:`~vjm_pin.analysis.critical.CriticalLoad` ``r``
+    (``load_list``: the dead loads as JSON, :func:`~vjm_pin.cli.analyze.loads_list`)."""
     return {
         "model": vm.name,
         "direction": r.direction,
+        "free": bool(free),
+        "loads": load_list if load_list is not None else [],
+        "gravity": gravity is not None,
         "force": r.force,
         "deflection": r.deflection,
         "kind": r.kind,
@@ -107,7 +135,7 @@ def critical_dict(vm, r) -> dict:
     }
 
 
-def _text(vm, r) -> str:
+def _text(vm, r, loads=(), gravity=None, free=False) -> str:
     import numpy as np
 
     rot = bool(np.any(r.direction[3:]))
@@ -125,6 +153,14 @@ def _text(vm, r) -> str:
             f"{r.residuals['location']:.1e} (relative) in {r.iterations} equilibrium evaluations"
         ),
     ]
+    if free:
+        lines.append("  end free across the direction (only the component along it held)")
+    for ld in loads:
+        lines.append(
+            f"  dead load at '{ld.frame}' [N, N·m, world axes]: {np.array2string(ld.wrench, precision=4)}"
+        )
+    if gravity is not None:
+        lines.append("  dead loads: link weights (gravity)")
     if not r.converged:
         lines.append(f"  NOT CONVERGED: {r.message}")
     return "\n".join(lines)
@@ -134,6 +170,7 @@ def run(args) -> int:
     import numpy as np
 
     from vjm_pin.analysis.critical import critical_load
+    from vjm_pin.cli.analyze import dead_loads_from_args, loads_list
     from vjm_pin.cli.common import direction_vector, dump_json, envelope, summary
     from vjm_pin.cli.curve import load_model
     from vjm_pin.exceptions import InputError, NoCriticalPoint
@@ -142,8 +179,11 @@ def run(args) -> int:
     d = direction_vector(args.direction, "--direction")
     if args.max_deflection is not None and not np.isfinite(args.max_deflection):
         raise InputError(f"--max-deflection must be finite, got {args.max_deflection}")
+    loads, gravity = dead_loads_from_args(args, vm)
+    # the mechanism options only when asked (as 'curve': open chains keep the serial path)
+    extra = {k: v for k, v in (("loads", loads), ("gravity", gravity), ("free", args.free)) if v}
     try:
-        r = critical_load(vm, d, max_deflection=args.max_deflection, rtol=args.rtol)
+        r = critical_load(vm, d, max_deflection=args.max_deflection, rtol=args.rtol, **extra)
     except NoCriticalPoint as e:
         import sys
 
@@ -154,7 +194,10 @@ def run(args) -> int:
         args, f"{vm.name}: {r.kind} at {r.force:.6g} {unit}, {r.iterations} equilibrium evaluations"
     )
     if args.json:
-        print(dump_json(envelope("critical", critical_dict(vm, r), UNITS)))
+        body = critical_dict(
+            vm, r, free=args.free, gravity=gravity, load_list=loads_list(args, loads)
+        )
+        print(dump_json(envelope("critical", body, UNITS)))
     else:
-        print(_text(vm, r))
+        print(_text(vm, r, loads, gravity, args.free))
     return 0 if r.converged else 3
