@@ -117,6 +117,7 @@ def _task(source, what, max_deflection: float, steps: int):
 
 #: Relative cost of the tasks (CPU seconds measured on one core), to start the longest first.
 _COST = {"2bar": 4.0, "coupled": 1.5, "folded": 1.0}
+_WHAT_COST = {"unloaded": 0.1, ("free", "-u"): 3.0, ("held", "-u"): 2.0, ("free", "+u"): 0.7}
 
 
 def compute(variants: dict, max_deflection: float, steps: int, jobs: int, log=sys.stderr) -> dict:
@@ -128,7 +129,7 @@ def compute(variants: dict, max_deflection: float, steps: int, jobs: int, log=sy
         for q in POINTS:
             src = ROOT / "models" / "urdf" / f"{prefix}-{q}.urdf"
             for what in ("unloaded", *LOADINGS):
-                weight = _COST.get(variant, 1.0) * (0.2 if what == "unloaded" else 3.0 if what == ("free", "-u") else 1.0)
+                weight = _COST.get(variant, 1.0) * _WHAT_COST.get(what, 1.0)
                 tasks.append((weight, variant, q, what, src))
     tasks.sort(key=lambda t: -t[0])
     res = {v: {q: {"curves": {}} for q in POINTS} for v in variants}

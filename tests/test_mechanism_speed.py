@@ -84,3 +84,93 @@ def test_an_unreachable_held_deflection_fails_with_the_same_error_after_fewer_it
     # a reachable held deflection is still found, and is an equilibrium
     ok = ms.solve(deflection=[0.01, 0.0, 0.0])
     assert ok.converged and ok.deflection[0] == pytest.approx(0.01, abs=1e-9)
+
+
+def _loaded_targets(ms, rng, size=2e-3):
+    from vjm_pin.kinematics.chain import displace
+
+    d = np.zeros(6)
+    d[[c for c in ms.task if c < 3]] = size * rng.standard_normal(len([c for c in ms.task if c < 3]))
+    return displace(ms.p0, ms.r0, d)
+
+
+@pytest.mark.parametrize("which", ["orthoglide-loop", "rssr-weld"])
+def test_line_search_trial_placements_equal_the_full_evaluation(which):
+    """The line search's trial points use placements only (no Jacobians): the closure residual,
+    the held rows' right-hand side and the task frame placement equal the full evaluation's."""
+    vm = _orthoglide_loop() if which == "orthoglide-loop" else spatial_rssr(3, weld=True, task=("x", "y", "z"))[1]
+    ms = MechanismSolver(vm)
+    rng = np.random.default_rng(5)
+    for hrows in (list(range(len(ms.task))), [0], []):
+        x = _random_x(vm, rng)
+        p_t, r_t = _loaded_targets(ms, rng)
+        end, b = ms._trial(x, hrows, p_t, r_t)
+        ms.frames._last = None
+        full = ms._state(x, hrows, np.zeros(6), p_t, r_t, 1.0, False)
+        assert np.abs(b - full.b).max() <= 1e-14 * max(np.abs(full.b).max(), 1.0)
+        assert np.abs(end.position - full.end.position).max() <= 1e-15
+        assert np.abs(end.rotation - full.end.rotation).max() <= 1e-15
+        placements = {f: (st.position, st.rotation) for f, st in ms.frames.evaluate(x, hessian=False).items()}
+        assert np.abs(ms.closures.residual_from(placements) - ms.closures.evaluate(x, False).residual).max() <= 1e-15
+
+
+@pytest.mark.parametrize("which", ["four-bar", "rssr-weld"])
+def test_descent_with_second_order_correction_reaches_the_equilibrium_without_it(which):
+    """The branch switch's descents try a rejected trial point again with the second-order
+    correction (``_newton(soc=True)``): from far starts it converges to the same equilibrium as
+    the plain descent."""
+    from vjm_pin.kinematics.chain import displace
+    from vjm_pin.solver.mechanism import STALL_WINDOW
+
+    vm = resolve_model("four-bar") if which == "four-bar" else spatial_rssr(3, weld=True, task=("x", "y", "z"))[1]
+    ms = MechanismSolver(vm)
+    rng = np.random.default_rng(3)
+    p_t, r_t = displace(ms.p0, ms.r0, np.zeros(6))
+    hrows = list(range(len(ms.task)))
+    for _ in range(3):
+        x0 = vm.reference.copy()
+        x0[ms.free] += 0.3 * rng.standard_normal(len(ms.free))
+        budget = DESCENT_ITER_FACTOR * ms.max_iter
+        xa, _, oka, _ = ms._newton(x0, hrows, np.zeros(6), p_t, r_t, 1.0, budget, stall=STALL_WINDOW)
+        xb, _, okb, sb = ms._newton(x0, hrows, np.zeros(6), p_t, r_t, 1.0, budget, stall=STALL_WINDOW, soc=True)
+        assert oka and okb
+        assert np.abs((xa - xb)[ms.free] / ms.var_scale).max() <= 1e-8
+        res = ms._result(xb, 0, True, hrows, np.zeros(6), p_t, r_t, "", state=sb)
+        assert res.residual() <= 1e-8
+
+
+def test_null_basis_from_one_svd_has_the_rank_of_constraint_rank():
+    """``_null_basis`` takes the rank from its own SVD of the row-normalised matrix: the same
+    rank as :func:`constraint_rank` (redundant and zero rows included) and an orthonormal basis
+    of the null space."""
+    from vjm_pin.kinematics.closures import constraint_rank
+    from vjm_pin.solver.mechanism import _null_basis
+
+    rng = np.random.default_rng(4)
+    for m, n, dep in ((5, 12, 0), (8, 12, 3), (6, 6, 2), (4, 9, 0)):
+        a = rng.standard_normal((m, n)) * np.array([1e-3, 1.0, 10.0, 1.0, 1.0, 1.0, 1.0, 1.0][:m])[:, None]
+        for i in range(dep):  # redundant rows: combinations of the first ones
+            a[m - 1 - i] = rng.standard_normal(2) @ a[:2]
+        a[0, :] = 0.0 if m == 4 else a[0, :]  # an identically zero row
+        z, rank = _null_basis(a, 1e-10)
+        assert rank == constraint_rank(a, rtol=1e-10).rank
+        assert z.shape == (n, n - rank)
+        assert np.abs(z.T @ z - np.eye(n - rank)).max() <= 1e-12
+        assert np.abs(a @ z).max() <= 1e-10 * np.abs(a).max()
+
+
+def test_mechanism_tracer_margin_alone_equals_the_full_evaluation():
+    """``evaluate(mu_only=True)`` (the margin's derivative and the rigid-start search) returns the
+    margin μ of the full evaluation."""
+    from vjm_pin.analysis.mechanism_curve import MechanismTracer
+
+    vm = _orthoglide_loop()
+    ms = MechanismSolver(vm)
+    d = np.array([1.0, -1.0, 1.0, 0.0, 0.0, 0.0]) / np.sqrt(3)
+    rng = np.random.default_rng(12)
+    for free in (True, False):
+        tr = MechanismTracer(vm, d, 5e-3, ms, 1e-6, free)
+        lin = tr.run.linearize(_random_x(vm, rng, 5e-3), tr.hrows, tr.wdead)
+        full = tr.evaluate(lin, need_tangent=False)
+        alone = tr.evaluate(lin, need_tangent=False, mu_only=True)
+        assert alone[0] == pytest.approx(full[0], rel=1e-12, abs=1e-12 * ms.kscale)

@@ -122,19 +122,22 @@ class MechanismTracer(_Tracer):
     def target(self, s: float):
         return displace(self.run.p0, self.run.r0, s * self.d)
 
-    def evaluate(self, lin, need_tangent: bool = True):
-        """(mu, lam, run verdict, end verdict, tangent or None, k, z_run) from a Linearization."""
+    def evaluate(self, lin, need_tangent: bool = True, mu_only: bool = False):
+        """(mu, lam, run verdict, end verdict, tangent or None, k, z_run) from a Linearization;
+        ``mu_only``: μ alone (the others None: the margin's derivative and the rigid-start search
+        need no more)."""
         w = lin.hessian
         c, j = lin.closure_jacobian, lin.task_jacobian
         rtol = self.run.rank_rtol
+        mu = _top(_verdict(w, _null_basis(np.vstack([c, self.p_rows @ j]), rtol)[0], self.verdict_thr))
+        if mu_only:
+            return mu, None, None, None, None, float("nan"), None
         z_run, _ = _null_basis(np.vstack([c, self.held6 @ j]), rtol)
-        z_mu, _ = _null_basis(np.vstack([c, self.p_rows @ j]), rtol)
         run = _verdict(w, z_run, self.verdict_thr)
         if self.held6.shape[0] == self.all6.shape[0]:
             end = run
         else:
             end = _verdict(w, _null_basis(np.vstack([c, self.all6 @ j]), rtol)[0], self.verdict_thr)
-        mu = _top(_verdict(w, z_mu, self.verdict_thr))
         tan, k = None, float("nan")
         if need_tangent:
             tan, k = self.bordered(lin)
@@ -187,7 +190,7 @@ class MechanismTracer(_Tracer):
 
     def mu_at(self, x) -> float:
         lin = self.run.linearize(x, self.hrows, self.wdead)
-        return self.evaluate(lin, need_tangent=False)[0]
+        return self.evaluate(lin, need_tangent=False, mu_only=True)[0]
 
     def dmu(self, p) -> float:
         """``dμ/ds`` at ``p``: forward difference along the tangent (as the serial tracer)."""
@@ -257,7 +260,7 @@ class MechanismTracer(_Tracer):
         p_t, r_t = self.target(s)
         x, it, ok, st = self.run._newton(
             np.asarray(x0, float), self.hrows, self.wdead, p_t, r_t, 1.0, DESCENT_ITER_FACTOR * self.run.max_iter,
-            stall=STALL_WINDOW,
+            stall=STALL_WINDOW, soc=True,
         )
         # no fall-back to the full solver here: a failed descent from one perturbed start is one
         # candidate less (switch tries the others, then the full solver once); a descent that
@@ -399,7 +402,7 @@ class MechanismTracer(_Tracer):
 
         def mu(f):
             lin = self.force_control_lin(x, f)
-            return self.evaluate(lin, need_tangent=False)[0]
+            return self.evaluate(lin, need_tangent=False, mu_only=True)[0]
 
         f = rigid_start_force(mu, max(self.run.kscale / self.run.length_scale, 1e-300))
         if f is None:

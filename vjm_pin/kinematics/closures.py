@@ -326,6 +326,7 @@ class ClosureSet:
         if screw:
             screw = screw_applicable(model)
         self.screw = bool(screw)
+        self._indices = tuple(list(c.indices) for c in self.closures)
 
     @property
     def n_rows(self) -> int:
@@ -337,9 +338,8 @@ class ClosureSet:
         screw = hessian and self.screw
         states = self.frames.evaluate(x, hessian=hessian and not screw)
         frames, res, jac = [], [], []
-        for c, (fa, fb) in zip(self.closures, self.pairs):
+        for c, (fa, fb), idx in zip(self.closures, self.pairs, self._indices):
             cf = closure_frames(c, states[fa], states[fb], screw)
-            idx = list(c.indices)
             frames.append(cf)
             res.append(cf.placement[idx])
             jac.append(cf.jacobian[idx])
@@ -350,6 +350,16 @@ class ClosureSet:
             labels=self.labels,
             frames=tuple(frames),
         )
+
+    def residual_from(self, placements) -> np.ndarray:
+        """``c(x)`` alone, from the placements of the closure frames at ``x`` (``{frame id:
+        (position (3,), rotation (3, 3))}``, world): no Jacobians (a line search's trial points).
+        The same numbers as :meth:`evaluate`'s ``residual`` from the same placements."""
+        res = [
+            relative_placement(*placements[fa], *placements[fb])[idx]
+            for (fa, fb), idx in zip(self.pairs, self._indices)
+        ]
+        return np.concatenate(res) if res else np.zeros(0)
 
 
 # --------------------------------------------------------------------------- redundancy

@@ -31,7 +31,9 @@ they are implied). Globalisation as the serial solver: a plain local Newton atte
 steps with the reduced Hessian shifted to be positive definite (descent towards a stable
 equilibrium), an Armijo line search on the merit ``Π + Σ ρ_i |b_i|`` (ℓ₁ penalty of the
 constraint residuals ``b``), an escape along negative curvature from a saddle, continuation in
-the load factor and the held deflection (4, then 16 steps), perturbed restarts.
+the load factor and the held deflection (4, then 16 steps), perturbed restarts. The line search's
+trial points need placements only; the curve tracer's branch-switch descents add the
+second-order correction to rejected trial points (:meth:`MechanismSolver._newton`, ``soc``).
 
 Multipliers. On the independent rows the multipliers are unique (least squares on the
 stationarity residual). With redundant rows (an over-constrained mechanism) the reactions are
@@ -237,19 +239,34 @@ class _State:
     dload: np.ndarray | None  # ∂Q/∂z (free block), hessian=True only
 
 
+@dataclass(frozen=True)
+class _Placement:
+    """A frame's placement at a trial point (world): ``position`` (3,) m, ``rotation`` (3, 3)."""
+
+    position: np.ndarray
+    rotation: np.ndarray
+
+
 def _null_basis(a: np.ndarray, rtol: float) -> tuple[np.ndarray, int]:
     """Orthonormal basis of the null space of ``a`` (rows normalised first, rank as
     :func:`~vjm_pin.kinematics.closures.constraint_rank`) and the rank."""
     n = a.shape[1]
     if a.shape[0] == 0:
         return np.eye(n), 0
-    info = constraint_rank(a, rtol=rtol)
     norms = np.linalg.norm(a, axis=1)
     keep = norms > 0
     s = np.zeros_like(a)
     s[keep] = a[keep] / norms[keep, None]
-    _, _, vt = np.linalg.svd(s, full_matrices=True)
-    return vt[info.rank :].T.copy(), info.rank
+    big = float(norms.max())
+    if not np.all(np.isfinite(a)) or np.any(keep & (norms <= rtol * big)):
+        # rows that constraint_rank counts as zero but are not: its rank, this SVD's basis
+        rank = constraint_rank(a, rtol=rtol).rank
+        _, _, vt = np.linalg.svd(s, full_matrices=True)
+        return vt[rank:].T.copy(), rank
+    # the same row-normalised matrix as constraint_rank: its rank from this one SVD
+    _, sv, vt = np.linalg.svd(s, full_matrices=True)
+    rank = int(np.sum(sv > rtol * float(sv[0]))) if sv.size and big > 0 else 0
+    return vt[rank:].T.copy(), rank
 
 
 def _verdict(w: np.ndarray, z: np.ndarray, thr: float) -> StabilityResult:
@@ -527,7 +544,7 @@ class MechanismSolver:
         if tl.size:
             d = deflection(self.p0, self.r0, end.position, end.rotation)
             pot -= float((tl @ w_dead) @ (tl @ d))
-        if factor:
+        if factor and (self.loads.loads or self._gravity_only is not None):
             states = self.frames.evaluate(x, hessian=False)
             for ld, fid, (p0, r0) in zip(self.loads.loads, self.loads.load_frame_ids, self._load_ref):
                 st = states[fid]
@@ -608,9 +625,14 @@ class MechanismSolver:
         return w
 
     # ----------------------------------------------------------------- Newton
-    def _newton(self, x, hrows, w_dead, p_t, r_t, factor, max_iter, local=False, stall=0):
+    def _newton(self, x, hrows, w_dead, p_t, r_t, factor, max_iter, local=False, stall=0, soc=False):
         """Returns (x, iterations, converged, state). ``stall``: give up (not converged) when the
-        last ``stall`` descent steps made no progress (:data:`STALL_WINDOW`); 0: never."""
+        last ``stall`` descent steps made no progress (:data:`STALL_WINDOW`); 0: never.
+        ``soc``: a trial point of the line search that the merit rejects is tried again with the
+        second-order correction ``−A_I⁺ b(x + αδx)`` (minimum-norm, the factorisation of the
+        iteration: Nocedal & Wright §15.6), which removes the constraint curvature's
+        O(|αδx|²) residual that otherwise makes the ℓ₁ merit cut the steps of a descent
+        along a curved constraint manifold (Maratos effect) to a crawl."""
         tol, lc = self.tol, self.length_scale
         kscale = max(self.kscale, 1e-300)
         shift = SHIFT_TOL * kscale
@@ -724,6 +746,15 @@ class MechanismSolver:
                             sn = self._state(xn, hrows, w_dead, p_t, r_t, factor, False)
                             kn = float(np.linalg.norm(sn.b / sn.bscale) + np.linalg.norm(sn.r) / kscale)
                             accepted = kn < 0.5 * kkt0
+                        if not accepted and soc and s.indep.size:
+                            with np.errstate(all="ignore"):
+                                xc = xn.copy()
+                                xc[self.free] += s.y @ np.linalg.solve(s.rr.T, bn[s.indep])
+                            end_c, bc = self._trial(xc, hrows, p_t, r_t)
+                            if np.all(np.isfinite(bc)):
+                                phi_c = self._potential(xc, end_c, lrows, w_dead, factor) + float(rho @ np.abs(bc))
+                                if phi_c <= (phi0 + 1e-4 * alpha * slope + noise):
+                                    accepted, xn, phi_n = True, xc, phi_c
                 if accepted:
                     break
                 alpha *= 0.5
@@ -740,11 +771,25 @@ class MechanismSolver:
         return x, max_iter, False, s
 
     def _trial(self, x, hrows, p_t, r_t):
-        """The task-frame state and the constraint right-hand side ``b`` at a trial point."""
-        end = self.frames.evaluate(x, hessian=False)[self.vm.frame_id]
-        cst = self.closures.evaluate(x, hessian=False)
+        """The task-frame placement (``position``, ``rotation``) and the constraint right-hand
+        side ``b`` at a trial point of the line search: placements only (one forward-kinematics
+        pass, no Jacobians; the same numbers as the full evaluation's)."""
+        pl = self._placements(x)
+        end = _Placement(*pl[self.vm.frame_id])
         e = self._split_axes(hrows)[0] @ pose_error(p_t, r_t, end.position, end.rotation)
-        return end, np.concatenate([-cst.residual, e])
+        return end, np.concatenate([-self.closures.residual_from(pl), e])
+
+    def _placements(self, x) -> dict:
+        """Frame id → (position, rotation) (world) of every frame this solver evaluates, at ``x``
+        (the thread's shared ``pin.Data``; copies)."""
+        model = self.vm.model
+        data = data_for(model)
+        pin.forwardKinematics(model, data, np.asarray(x, float))
+        out = {}
+        for fid in self.frames.frame_ids:
+            m = pin.updateFramePlacement(model, data, fid)
+            out[fid] = (m.translation.copy(), m.rotation.copy())
+        return out
 
     def _is_position_row(self, hrows) -> np.ndarray:
         cp = np.array([c in ("x", "y", "z") for cl in self.closures.closures for c in cl.components], bool)
