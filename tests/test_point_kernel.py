@@ -168,14 +168,20 @@ def test_rigid_start_is_left_to_the_generic_path(kind, fn):
 
 
 def _trace_both(name, direction, max_deflection, steps):
+    """The curve with every point by the generic path and with the kernel, both with the
+    first-order predictor (the second-order one changes the Newton iterates: its own test in
+    tests/test_curve.py)."""
     vm = resolve_model(name)
-    old = curve_mod._fast_points
+    old, old2 = curve_mod._fast_points, curve_mod._second_order
     try:
+        curve_mod._second_order = False
         curve_mod._fast_points = False
         generic = trace_curve(vm, direction, max_deflection, steps=steps)
-    finally:
         curve_mod._fast_points = old
-    return generic, trace_curve(vm, direction, max_deflection, steps=steps)
+        fast = trace_curve(vm, direction, max_deflection, steps=steps)
+    finally:
+        curve_mod._fast_points, curve_mod._second_order = old, old2
+    return generic, fast
 
 
 @pytest.mark.parametrize(
@@ -220,3 +226,44 @@ def test_curve_module_does_not_import_numba_and_jit_off_never_does():
     env = dict(os.environ, VJM_PIN_JIT="0")
     r = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300, check=False)
     assert r.returncode == 0, r.stderr
+
+
+def _symmetric_cases():
+    rng = np.random.default_rng(7)
+    out = []
+    for n in (1, 2, 3, 6, 20, 37):
+        a = rng.standard_normal((n, n))
+        out.append(a + a.T)
+        g = np.diag(np.logspace(-6, 6, n)) @ (a + a.T) @ np.diag(np.logspace(-6, 6, n))
+        out.append(g)  # graded: eigenvalues over ~24 decades
+    b = rng.standard_normal((8, 8))
+    q, _ = np.linalg.qr(b)
+    out.append(q @ np.diag([3.0, 3.0, 1.0, 0.5, -1.0, -2.0, -4.0, -9.0]) @ q.T)  # a double top eigenvalue
+    blk = np.zeros((6, 6))
+    blk[:3, :3] = np.diag([1.0, -2.0, 0.5])
+    blk[3:, 3:] = np.array([[2.0, 1.0, 0.0], [1.0, -1.0, 0.3], [0.0, 0.3, 0.7]])
+    out.append(blk)  # decoupled: the tridiagonal form splits
+    out.append(np.zeros((4, 4)))
+    out.append(-np.eye(5))  # every eigenvalue equal
+    return out
+
+
+@pytest.mark.parametrize("compiled_", [False, True], ids=["python", "compiled"])
+def test_top_eigenpair_matches_lapack(compiled_):
+    """The compiled kernel's largest eigenpair (tridiagonalisation, Sturm bisection, inverse
+    iteration) against LAPACK's full decomposition: the value to a few ε‖a‖, the vector a unit
+    eigenvector (residual ε‖a‖; inside the eigenspace for a multiple eigenvalue)."""
+    if compiled_:
+        if not pk.compiled():
+            pytest.skip("numba is not importable here")
+        fn = pk._top_eigpair  # compiled() replaced the module global by its compiled twin
+        assert hasattr(fn, "py_func")
+    else:
+        fn = getattr(pk._top_eigpair, "py_func", pk._top_eigpair)
+    for a in _symmetric_cases():
+        ev = np.linalg.eigvalsh(a)
+        lam, v = fn(a.copy())
+        scale = max(np.abs(ev).max(), 1e-300)
+        assert abs(lam - ev[-1]) <= 1e-14 * scale * max(1, a.shape[0] / 4), (a.shape, lam, ev[-1])
+        assert abs(np.linalg.norm(v) - 1.0) <= 1e-13
+        assert np.linalg.norm(a @ v - lam * v) <= 1e-13 * scale * a.shape[0], a.shape

@@ -32,7 +32,8 @@ margin (:data:`FAST_RANK`), the kernel returns None and the caller takes the gen
 Two implementations of the same contract: the numpy methods of :class:`PointKernel` (scipy's
 LAPACK directly for small orders) and the compiled :func:`_point_loops` (numba
 ``njit(cache=True)``, explicit loops and numba's ``np.linalg``: one call instead of ~60 small
-numpy calls per point). numba is imported lazily (:func:`use_compiled`, the solver's
+numpy calls per point; ``Vᵀ(H − K)V`` from the QR's reflectors applied to ``H − K``, and only
+the largest eigenpair of it, :func:`_top_eigpair`, instead of a full ``eigh``). numba is imported lazily (:func:`use_compiled`, the solver's
 ``VJM_PIN_JIT`` switch): never at import, never with ``VJM_PIN_JIT=0``, and in ``auto`` mode
 only once numba is loaded anyway (the solver's kernel switches after
 :data:`vjm_pin.solver.kernel.JIT_AFTER_ITERATIONS` iterations: one rule for the whole package).
@@ -85,12 +86,17 @@ class PointKernel:
         jac = np.empty((self.m, n))
         jac[:, :nt] = b.J_theta
         jac[:, nt:] = b.J_q
+        return jac, self.hessian(b)
+
+    def hessian(self, b):
+        """H (n, n) in (θ, q) order from :class:`~vjm_pin.solver.blocks.Blocks`."""
+        nt, n = self.nt, self.n
         hz = np.empty((n, n))
         hz[:nt, :nt] = b.H_tt
         hz[:nt, nt:] = b.H_tq
         hz[nt:, :nt] = b.H_qt
         hz[nt:, nt:] = b.H_qq
-        return jac, hz
+        return hz
 
     def factor(self, jac: np.ndarray):
         """(Q = [Y Z] (n, n), R (m, m) upper triangular, y₀ = Y R⁻ᵀ d_t) of ``Jᵀ``, or None
@@ -221,7 +227,14 @@ class PointKernel:
         generic path must decide (near-singular ``J`` or matrix of eq. 28). ``fn``: the
         compiled twin (:func:`compiled`) to use instead of numpy."""
         if fn is not None:
-            _, hz = self.matrices(b)
+            # a long chain: O(n) algebra (chain_kernel), the dense kernel where it is unsure
+            from vjm_pin.solver import chain_kernel
+
+            if self.n >= chain_kernel.POINT_MIN_N and mask is not None and wrench is not None:
+                got = chain_kernel.point(self, b, mask, wrench, FAST_RANK)
+                if got is not None:
+                    return got
+            hz = self.hessian(b)
             jfree = np.ascontiguousarray(b.state.jacobian.take(self.free, axis=1))
             rate_wanted = mask is not None
             try:
@@ -262,6 +275,195 @@ class PointKernel:
 
 
 # --------------------------------------------------------------------------- compiled twin
+def _top_eigpair(a):
+    """The largest eigenvalue of the symmetric (n, n) ``a`` (lower triangle read; ``a`` is
+    overwritten) and a unit eigenvector, for :func:`_point_loops` (compiled with it): Householder
+    tridiagonalisation ``a = Q T Qᵀ`` (``4n³/3``), bisection (by quarters) on the Sturm count
+    of ``T`` from the Gershgorin bracket to LAPACK's tolerance ``max(2ε|λ|, ε‖T‖)``, inverse
+    iteration on ``T`` (partial pivoting, three solves from a fixed start) and ``Q`` applied to
+    the vector — instead of every eigenpair
+    (``np.linalg.eigh``): the value to a few units of ``ε‖a‖`` as LAPACK's, the vector to
+    ``ε‖a‖/gap`` (in a multiple top eigenvalue some unit vector of its eigenspace)."""
+    n = a.shape[0]
+    d = np.zeros(n)
+    e = np.zeros(n)
+    vs = np.zeros((n, n))  # Householder vectors: column k acts on rows k+1..n-1
+    taus = np.zeros(n)
+    p = np.zeros(n)
+    for k in range(n - 2):
+        nrm = 0.0
+        for i in range(k + 1, n):
+            nrm += a[i, k] * a[i, k]
+        nrm = np.sqrt(nrm)
+        d[k] = a[k, k]
+        if nrm == 0.0:
+            e[k] = 0.0
+            continue
+        alpha = -nrm if a[k + 1, k] >= 0 else nrm
+        vv = 0.0
+        for i in range(k + 1, n):
+            vi = a[i, k] - alpha if i == k + 1 else a[i, k]
+            vs[i, k] = vi
+            vv += vi * vi
+        e[k] = alpha
+        if vv == 0.0:
+            continue
+        tau = 2.0 / vv
+        taus[k] = tau
+        # p = τ A22 v (lower triangle of A22), K = τ/2 pᵀv, w = p − K v, A22 −= v wᵀ + w vᵀ
+        for i in range(k + 1, n):
+            acc = 0.0
+            for j in range(k + 1, i + 1):
+                acc += a[i, j] * vs[j, k]
+            for j in range(i + 1, n):
+                acc += a[j, i] * vs[j, k]
+            p[i] = tau * acc
+        pv = 0.0
+        for i in range(k + 1, n):
+            pv += p[i] * vs[i, k]
+        kk = 0.5 * tau * pv
+        for i in range(k + 1, n):
+            p[i] -= kk * vs[i, k]
+        for i in range(k + 1, n):
+            for j in range(k + 1, i + 1):
+                a[i, j] -= vs[i, k] * p[j] + p[i] * vs[j, k]
+    if n >= 2:
+        d[n - 2] = a[n - 2, n - 2]
+        e[n - 2] = a[n - 1, n - 2]
+    d[n - 1] = a[n - 1, n - 1]
+    # Gershgorin bracket of the largest eigenvalue of T, bisection on the Sturm count
+    tnorm = 0.0
+    lo = np.inf
+    hi = -np.inf
+    for i in range(n):
+        r = (abs(e[i - 1]) if i > 0 else 0.0) + (abs(e[i]) if i < n - 1 else 0.0)
+        lo = min(lo, d[i] - r)
+        hi = max(hi, d[i] + r)
+        tnorm = max(tnorm, abs(d[i]) + r)
+    eps = 2.220446049250313e-16
+    pivmin = max(tnorm * eps * eps, 1e-300)
+    if tnorm == 0.0:
+        lam = 0.0
+    else:
+        lo -= 2.0 * eps * tnorm
+        hi += 2.0 * eps * tnorm
+        atol = max(eps * tnorm, pivmin)  # LAPACK's (dstebz) default absolute tolerance
+        for _ in range(200):
+            if hi - lo <= max(2.0 * eps * max(abs(lo), abs(hi)), atol):
+                break
+            # quadrisection: three independent Sturm counts (their division chains overlap)
+            w4 = 0.25 * (hi - lo)
+            s1 = lo + w4
+            s2 = lo + 2.0 * w4
+            s3 = hi - w4
+            if not (lo < s1 < s2 < s3 < hi):
+                break
+            c1 = 0
+            c2 = 0
+            c3 = 0
+            q1 = d[0] - s1
+            q2 = d[0] - s2
+            q3 = d[0] - s3
+            for i in range(n):
+                if i > 0:
+                    e2 = e[i - 1] * e[i - 1]
+                    q1 = d[i] - s1 - e2 / q1
+                    q2 = d[i] - s2 - e2 / q2
+                    q3 = d[i] - s3 - e2 / q3
+                if abs(q1) < pivmin:
+                    q1 = -pivmin
+                if abs(q2) < pivmin:
+                    q2 = -pivmin
+                if abs(q3) < pivmin:
+                    q3 = -pivmin
+                if q1 < 0:
+                    c1 += 1
+                if q2 < 0:
+                    c2 += 1
+                if q3 < 0:
+                    c3 += 1
+            if c1 == n:  # every eigenvalue below s1
+                hi = s1
+            elif c2 == n:
+                lo, hi = s1, s2
+            elif c3 == n:
+                lo, hi = s2, s3
+            else:
+                lo = s3
+        lam = 0.5 * (lo + hi)
+    # inverse iteration on T − λI (tridiagonal LU with partial pivoting, pivots floored)
+    floor = max(eps * tnorm, 1e-300)
+    y = np.empty(n)
+    for i in range(n):
+        y[i] = 1.0 + ((i * 7919) % 101) / 101.0
+    dl = np.empty(n)
+    dd = np.empty(n)
+    du = np.empty(n)
+    du2 = np.zeros(n)
+    piv = np.zeros(n, np.bool_)
+    for i in range(n):
+        dd[i] = d[i] - lam
+        if i < n - 1:
+            dl[i] = e[i]
+            du[i] = e[i]
+    for i in range(n - 1):  # LAPACK dgttrf
+        if abs(dd[i]) >= abs(dl[i]):
+            if abs(dd[i]) < floor:
+                dd[i] = floor
+            f = dl[i] / dd[i]
+            dl[i] = f
+            dd[i + 1] -= f * du[i]
+            if i < n - 2:
+                du2[i] = 0.0
+        else:
+            f = dd[i] / dl[i]
+            dd[i] = dl[i]
+            dl[i] = f
+            t = du[i]
+            du[i] = dd[i + 1]
+            dd[i + 1] = t - f * dd[i + 1]
+            if i < n - 2:
+                du2[i] = du[i + 1]
+                du[i + 1] = -f * du[i + 1]
+            piv[i] = True
+    if abs(dd[n - 1]) < floor:
+        dd[n - 1] = floor
+    for _ in range(3):
+        for i in range(n - 1):  # forward: L
+            if piv[i]:
+                t = y[i]
+                y[i] = y[i + 1]
+                y[i + 1] = t - dl[i] * y[i + 1]
+            else:
+                y[i + 1] -= dl[i] * y[i]
+        y[n - 1] /= dd[n - 1]  # backward: U
+        if n >= 2:
+            y[n - 2] = (y[n - 2] - du[n - 2] * y[n - 1]) / dd[n - 2]
+        for i in range(n - 3, -1, -1):
+            y[i] = (y[i] - du[i] * y[i + 1] - du2[i] * y[i + 2]) / dd[i]
+        big = 0.0
+        for i in range(n):
+            big = max(big, abs(y[i]))
+        nrm = 0.0
+        for i in range(n):
+            y[i] /= big
+            nrm += y[i] * y[i]
+        nrm = np.sqrt(nrm)
+        for i in range(n):
+            y[i] /= nrm
+    # x = H_0 H_1 ⋯ H_{n−3} y
+    for k in range(n - 3, -1, -1):
+        if taus[k] == 0.0:
+            continue
+        s = 0.0
+        for i in range(k + 1, n):
+            s += vs[i, k] * y[i]
+        s *= taus[k]
+        for i in range(k + 1, n):
+            y[i] -= s * vs[i, k]
+    return lam, y
+
+
 def _point_loops(jfree, hz, kz, task, dt, mask, wrench, nt, use_rate, fast_rank, sing_rcond):
     """The whole of :meth:`PointKernel.point` in one compiled call (numba, explicit loops and
     numba's ``np.linalg``): the equilibrated inverse of eq. (28) with the regularity test of
@@ -352,6 +554,8 @@ def _point_loops(jfree, hz, kz, task, dt, mask, wrench, nt, use_rate, fast_rank,
     # ---- complete QR of Jᵀ (Householder): Q = [Y Z], R (m, m)
     w0 = jac.T.copy()
     q = np.eye(n)
+    hv = np.zeros((n, m))  # the reflectors H_j = I − 2 v vᵀ/(vᵀv), v = hv[j:, j]: Q = H_0 ⋯ H_{m−1}
+    hvv = np.zeros(m)
     for j in range(m):
         nrm = 0.0
         for i in range(j, n):
@@ -367,6 +571,9 @@ def _point_loops(jfree, hz, kz, task, dt, mask, wrench, nt, use_rate, fast_rank,
             vv += v[i] * v[i]
         if vv == 0.0:
             continue
+        for i in range(v.shape[0]):
+            hv[j + i, j] = v[i]
+        hvv[j] = vv
         for c in range(j, m):
             s = 0.0
             for i in range(v.shape[0]):
@@ -394,34 +601,66 @@ def _point_loops(jfree, hz, kz, task, dt, mask, wrench, nt, use_rate, fast_rank,
         for j in range(i):
             s -= rmat[j, i] * u[j]
         u[i] = s / rmat[i, i]
-    y0 = np.zeros(n)
-    for r in range(n):
-        s = 0.0
-        for j in range(m):
-            s += q[r, j] * u[j]
-        y0[r] = s
-    ny = np.sqrt(np.sum(y0 * y0))
+    # V = [Z, y₀/‖y₀‖] = Q [[0, û], [I, 0]] (y₀ = Y u, û = u/‖u‖): Vᵀ A V from QᵀAQ, the m
+    # reflectors applied on both sides of A (4mn² instead of the products with V, 4n³)
+    nu = 0.0
+    for j in range(m):
+        nu += u[j] * u[j]
+    nu = np.sqrt(nu)
+    uh = np.empty(m)
+    for j in range(m):
+        uh[j] = u[j] / nu
     dim = n - m + 1
-    vb = np.empty((n, dim))
-    for r in range(n):
-        for c in range(n - m):
-            vb[r, c] = q[r, m + c]
-        vb[r, dim - 1] = y0[r] / ny
     asym = np.empty((n, n))
     for i in range(n):
         for j in range(n):
             asym[i, j] = 0.5 * (hz[i, j] + hz[j, i]) - kz[i, j]
-    red = vb.T @ (asym @ vb)
-    for i in range(dim):
-        for j in range(i):
-            t = 0.5 * (red[i, j] + red[j, i])
+    bq = asym.copy()
+    for j in range(m):
+        if hvv[j] == 0.0:
+            continue
+        beta = 2.0 / hvv[j]
+        for c in range(n):  # H_j from the left
+            s = 0.0
+            for i in range(j, n):
+                s += hv[i, j] * bq[i, c]
+            s *= beta
+            for i in range(j, n):
+                bq[i, c] -= s * hv[i, j]
+        for r in range(n):  # and from the right
+            s = 0.0
+            for i in range(j, n):
+                s += bq[r, i] * hv[i, j]
+            s *= beta
+            for i in range(j, n):
+                bq[r, i] -= s * hv[i, j]
+    red = np.empty((dim, dim))
+    for i in range(n - m):
+        for j in range(i + 1):
+            t = 0.5 * (bq[m + i, m + j] + bq[m + j, m + i])
             red[i, j] = t
             red[j, i] = t
-    ev, uu = np.linalg.eigh(red)
-    mu = ev[dim - 1]
+        s = 0.0
+        for a3 in range(m):
+            s += uh[a3] * 0.5 * (bq[a3, m + i] + bq[m + i, a3])
+        red[dim - 1, i] = s
+        red[i, dim - 1] = s
+    s = 0.0
+    for a3 in range(m):
+        for b3 in range(m):
+            s += uh[a3] * bq[a3, b3] * uh[b3]
+    red[dim - 1, dim - 1] = s
+    mu, top = _top_eigpair(red)
     if not use_rate:
         return 0, k, xd, fd, mu, nan
-    w = vb @ uu[:, dim - 1].copy()
+    w = np.zeros(n)  # V top = Z top[:n−m] + Y û top[−1]
+    for r in range(n):
+        s = 0.0
+        for c in range(n - m):
+            s += q[r, m + c] * top[c]
+        for j in range(m):
+            s += q[r, j] * uh[j] * top[dim - 1]
+        w[r] = s
     # ---- dμ/ds = wᵀH'w − 2 gᵀJ'w (PointKernel.margin_rate)
     res = asym @ w - mu * w
     yr = np.zeros(m)
@@ -540,9 +779,12 @@ def compiled():
         except Exception:  # noqa: BLE001 - any import failure: the numpy path
             _compiled = False
             return _compiled
+        g = globals()
         try:
+            g["_top_eigpair"] = numba.njit(cache=True, nogil=True)(_top_eigpair)
             _compiled = numba.njit(cache=True, nogil=True)(_point_loops)
         except RuntimeError:  # no writable cache location: compile in memory
+            g["_top_eigpair"] = numba.njit(nogil=True)(getattr(_top_eigpair, "py_func", _top_eigpair))
             _compiled = numba.njit(nogil=True)(_point_loops)
     return _compiled
 

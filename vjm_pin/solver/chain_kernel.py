@@ -1,0 +1,1337 @@
+"""Compiled O(n) versions of the two hot per-point routines for long serial chains (issue 14).
+
+The fused Newton iteration (:func:`vjm_pin.solver.kernel.iterate_compiled`) and the curve's
+point kernel (:func:`vjm_pin.analysis.point_kernel._point_loops`) work on dense ``n × n``
+matrices: ``QᵀWQ`` (``4mn²``), an LU of ``ZᵀWZ`` (``n³/3``), and at every equilibrium a full
+symmetric eigenvalue decomposition of eq. (23)'s reduced matrix (and of the force-control
+margin's). For a chain of 1-DoF joints ``W = K − H`` is block diagonal plus a rank-3
+semiseparable matrix (:mod:`vjm_pin.solver.chain_algebra`), and every one of those steps has an
+O(n) counterpart by elimination along the chain:
+
+- the Newton step of eq. (28), ``W δx + Jᵀλ = −r``, ``J δx = e``: one factorisation of the
+  bordered (scaled, augmented) KKT matrix and a refined solve;
+- the ``follow_stable`` test (``½(ZᵀWZ + (ZᵀWZ)ᵀ) − shift·I ≻ 0``): Sylvester's count of the
+  negative pivots of the symmetric bordered matrix shifted by ``shift`` (Haynsworth: the KKT
+  inertia is the reduced one plus ``(m, m, 0)``);
+- eq. (23)'s verdict and margin: only its *largest* eigenvalue (``−λ₁``, ``λ₁`` the smallest
+  eigenvalue of ``Zᵀ W_s Z``) is used by the callers (``stable = max(ev) < −thr``, the tracer's
+  ``λ`` and its zero crossings), found by inverse iteration on the bordered matrix shifted just
+  below it, the shift certified by a Sturm count (no eigenvalue below it), then a second count
+  just below the converged Rayleigh quotient certifies that it is the smallest eigenvalue;
+  a previous eigenvector (the last point of a curve, the last solve) starts it, bisection on the
+  Sturm count brackets it when there is none;
+- the point kernel: the tangent of eq. (29) (the same KKT matrix, right-hand side ``d_t``), the
+  force-control margin ``μ`` (the same eigenvalue problem with the held rows ``P J``) with its
+  eigenvector, and ``dμ/ds`` of :meth:`~vjm_pin.analysis.point_kernel.PointKernel.margin_rate`
+  with its sums over the support (``j ≤ i`` in chain order) as prefix and suffix sums.
+
+The Householder QR of ``Jᵀ`` (O(n m²)), the multiplier, the residual, the convergence test and
+the rank test are the dense kernel's arithmetic, unchanged (the same bits), so the factorisation
+tuple ``fact`` can be handed between the two implementations (the chain kernel appends the six
+Jacobian rows to the reflectors, rows the dense kernel never reads).
+
+Where the elimination is not trustworthy (a pivot with a reciprocal condition below
+:data:`TRUST_RCOND`: next to a critical point; a solve residual above
+:data:`~vjm_pin.solver.chain_algebra.SOLVE_RTOL`; an eigenvalue not certified) the routine says
+so and the caller runs the dense routine, which decides exactly as before.
+
+What the iteration reports at convergence changes with it: ``ev`` is the (1,) array of eq. (23)'s
+largest eigenvalue, so :class:`~vjm_pin.solver.stability.StabilityResult` of a fused solve of a
+long chain holds that eigenvalue only (``stable``, ``margin`` and the tracer's ``λ`` are
+unchanged; :func:`~vjm_pin.solver.stability.check_stability` gives all of them).
+
+Implementations: the loops below, compiled by numba (``njit(cache=True)``, loaded with the
+solver's kernel: only on the compiled path, ``VJM_PIN_JIT`` not 0), and the same loops run by
+the interpreter (the twin the tests compare with the compiled code; the independent reference
+is the dense kernels). With ``VJM_PIN_JIT=0`` the dense numpy twins stay in use: interpreted,
+these loops are slower than dense numpy at any size. The dispatch is by size,
+:data:`ITERATE_MIN_N` and :data:`POINT_MIN_N` free coordinates (measured crossovers with the
+dense compiled kernels on the Model C column: at n = 38 the chain's Newton step is slower, at
+n = 56 every call is faster).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from vjm_pin.solver import kernel as _kernel
+from vjm_pin.solver.chain_algebra import PIVOT_RCOND, RHO_FACTOR, SOLVE_RTOL
+
+#: Free coordinates from which the compiled fused iteration uses the chain kernel.
+ITERATE_MIN_N = 56
+#: Free coordinates from which the compiled point kernel of a curve uses the chain kernel.
+POINT_MIN_N = 56
+#: Smallest pivot reciprocal condition for which a chain factorisation of eq. (28) is used (as
+#: :data:`vjm_pin.solver.stiffness.CHAIN_TRUST_RCOND`): below it the dense routine decides.
+TRUST_RCOND = 1e-8
+#: Relative accuracy of the smallest eigenvalue (plus ``1e-13·max|K_θ|`` absolute).
+EIG_RTOL = 1e-13
+#: Inverse iterations before the result is declared unconverged (then the dense routine runs).
+MAX_INVERSE = 40
+#: Largest change of the unit eigenvector in the last inverse iteration: the verdict's (only
+#: the next solve's start needs it) and the force-control margin's (``dμ/ds`` is linear in it).
+VEC_TOL_VERDICT = 1e-8
+VEC_TOL_MARGIN = 1e-11
+
+NEED_DENSE = 9  #: status: the chain result is not trustworthy, run the dense routine
+_CONTINUE, _POLISH, _CONVERGED = _kernel.CONTINUE, _kernel.POLISH, _kernel.CONVERGED
+_FACTOR_FAIL, _STEP_FAIL, _RANK_FAIL = _kernel.FACTOR_FAIL, _kernel.STEP_FAIL, _kernel.RANK_FAIL
+
+
+# =========================================================================== compiled pieces
+def _w_gens(jz, f6, starts, kd, symmetric):
+    """Generators of ``W = K − H`` (or its symmetric part) in chain order (chain_algebra's
+    :func:`~vjm_pin.solver.chain_algebra.chain_matrix`): ``(diag, u, v, p, q)``."""
+    n = jz.shape[1]
+    b = kd.shape[1]
+    f0, f1, f2, m0, m1, m2 = f6[0], f6[1], f6[2], f6[3], f6[4], f6[5]
+    a = np.empty((n, 3))
+    d = np.empty((n, 3))
+    e = np.empty((n, 3))
+    w = np.empty((n, 3))
+    for i in range(n):
+        v0, v1, v2 = jz[0, i], jz[1, i], jz[2, i]
+        w0, w1, w2 = jz[3, i], jz[4, i], jz[5, i]
+        d[i, 0] = v1 * f2 - v2 * f1
+        d[i, 1] = v2 * f0 - v0 * f2
+        d[i, 2] = v0 * f1 - v1 * f0
+        e[i, 0] = w1 * m2 - w2 * m1
+        e[i, 1] = w2 * m0 - w0 * m2
+        e[i, 2] = w0 * m1 - w1 * m0
+        for c in range(3):
+            a[i, c] = d[i, c] + e[i, c]
+        w[i, 0], w[i, 1], w[i, 2] = w0, w1, w2
+    wd = np.zeros((n, b))
+    for k in range(starts.shape[0] - 1):
+        s0, s1 = starts[k], starts[k + 1]
+        for i in range(s0, s1):
+            for j in range(s0, s1):
+                if j <= i:
+                    hij = a[i, 0] * w[j, 0] + a[i, 1] * w[j, 1] + a[i, 2] * w[j, 2]
+                else:
+                    hij = w[i, 0] * d[j, 0] + w[i, 1] * d[j, 1] + w[i, 2] * d[j, 2]
+                if symmetric:
+                    if i <= j:
+                        hji = a[j, 0] * w[i, 0] + a[j, 1] * w[i, 1] + a[j, 2] * w[i, 2]
+                    else:
+                        hji = w[j, 0] * d[i, 0] + w[j, 1] * d[i, 1] + w[j, 2] * d[i, 2]
+                    hij = 0.5 * (hij + hji)
+                wd[i, j - s0] = kd[i, j - s0] - hij
+    if symmetric:
+        uu = np.empty((n, 3))
+        for i in range(n):
+            for c in range(3):
+                uu[i, c] = -(d[i, c] + 0.5 * e[i, c])
+        return wd, uu, w, w, uu
+    neg_a = -a
+    neg_w = -w
+    return wd, neg_a, w, neg_w, d
+
+
+def _bordered(wd, wu, wv, wp, wq, starts, dpos, kp, cb):
+    """The scaled, augmented bordered matrix ``[[S(W + ρCᵀC)S, SCᵀ], [CS, 0]]`` of
+    :class:`~vjm_pin.solver.chain_algebra.ChainKKT` (shift 0): ``(bst, bd, bu, bv, bp, bq, s, ρ)``."""
+    n, b = wd.shape
+    k = cb.shape[0]
+    r0 = wu.shape[1]
+    s0_ = wq.shape[1]
+    nb = starts.shape[0] - 1
+    jn = np.zeros(n)
+    for c in range(k):
+        for i in range(n):
+            jn[i] += cb[c, i] * cb[c, i]
+    kref_sum = 0.0
+    npos = 0
+    for i in range(n):
+        t = abs(wd[i, dpos[i]])
+        if t != 0.0:
+            kref_sum += t
+            npos += 1
+    kref = kref_sum / npos if npos else 1.0
+    comp = 0.0
+    for kb in range(nb):
+        a0, a1 = starts[kb], starts[kb + 1]
+        for c in range(k):
+            for i in range(a0, a1):
+                t = 0.0
+                for j in range(a0, a1):
+                    t += kp[i, j - a0] * cb[c, j]
+                comp += cb[c, i] * t
+    if k == 0:
+        rho = 0.0
+    elif comp > 0.0 and math.isfinite(comp):
+        rho = RHO_FACTOR * k / comp
+    else:
+        mj = 0.0
+        for i in range(n):
+            mj += jn[i]
+        rho = RHO_FACTOR * kref / max(mj / max(n, 1), 1e-300)
+    s = np.empty(n)
+    for i in range(n):
+        dw = abs(wd[i, dpos[i]]) + rho * jn[i]
+        s[i] = 1.0 / math.sqrt(dw) if dw > 0.0 else 1.0 / math.sqrt(kref)
+    bsz = max(b, k)
+    bd = np.zeros((n + k, bsz))
+    for kb in range(nb):
+        a0, a1 = starts[kb], starts[kb + 1]
+        for i in range(a0, a1):
+            for j in range(a0, a1):
+                t = 0.0
+                for c in range(k):
+                    t += cb[c, i] * cb[c, j]
+                bd[i, j - a0] = (wd[i, j - a0] + rho * t) * s[i] * s[j]
+    bu = np.zeros((n + k, r0 + k))
+    bv = np.zeros((n + k, r0 + k))
+    bp = np.zeros((n + k, s0_ + k))
+    bq = np.zeros((n + k, s0_ + k))
+    for i in range(n):
+        si = s[i]
+        for c in range(r0):
+            bu[i, c] = wu[i, c] * si
+            bv[i, c] = wv[i, c] * si
+        for c in range(s0_):
+            bp[i, c] = wp[i, c] * si
+            bq[i, c] = wq[i, c] * si
+        for c in range(k):
+            js = si * cb[c, i]
+            bu[i, r0 + c] = rho * js
+            bv[i, r0 + c] = js
+            bp[i, s0_ + c] = js
+            bq[i, s0_ + c] = rho * js
+    for c in range(k):
+        bu[n + c, r0 + c] = 1.0
+        bq[n + c, s0_ + c] = 1.0
+    if k > 0:
+        bst = np.empty(nb + 2, np.int64)
+        bst[: nb + 1] = starts
+        bst[nb + 1] = n + k
+    else:
+        bst = starts.copy()
+    return bst, bd, bu, bv, bp, bq, s, rho
+
+
+def _inertia_small(a, nk, tiny):
+    """``(positive, negative, zero)`` of the symmetric ``a[:nk, :nk]`` (destroyed) by symmetric
+    elimination with Bunch–Parlett pivoting (1×1 or 2×2 pivots; Sylvester's law of inertia)."""
+    alpha = (1.0 + math.sqrt(17.0)) / 8.0
+    alive = np.ones(nk, np.bool_)
+    npos, nneg, nzero = 0, 0, 0
+    left = nk
+    while left > 0:
+        gd, idd = -1.0, -1
+        go, io, jo = 0.0, -1, -1
+        for i in range(nk):
+            if not alive[i]:
+                continue
+            if abs(a[i, i]) > gd:
+                gd, idd = abs(a[i, i]), i
+            for j in range(i + 1, nk):
+                if alive[j] and abs(a[i, j]) > go:
+                    go, io, jo = abs(a[i, j]), i, j
+        if gd >= alpha * go or left == 1:
+            piv = a[idd, idd]
+            if piv > tiny:
+                npos += 1
+            elif piv < -tiny:
+                nneg += 1
+            else:
+                nzero += 1
+            alive[idd] = False
+            left -= 1
+            if piv != 0.0:
+                for i in range(nk):
+                    if alive[i]:
+                        f = a[i, idd] / piv
+                        for j in range(nk):
+                            if alive[j]:
+                                a[i, j] -= f * a[idd, j]
+        else:
+            p11, p12, p22 = a[io, io], a[io, jo], a[jo, jo]
+            det = p11 * p22 - p12 * p12
+            if det < 0.0:
+                npos += 1
+                nneg += 1
+            elif det > 0.0:
+                if p11 + p22 > 0.0:
+                    npos += 2
+                else:
+                    nneg += 2
+            else:
+                nzero += 1
+                if p11 + p22 > 0.0:
+                    npos += 1
+                else:
+                    nneg += 1
+            alive[io] = False
+            alive[jo] = False
+            left -= 2
+            if det != 0.0:
+                i11, i12, i22 = p22 / det, -p12 / det, p11 / det
+                for i in range(nk):
+                    if alive[i]:
+                        c1 = a[i, io] * i11 + a[i, jo] * i12
+                        c2 = a[i, io] * i12 + a[i, jo] * i22
+                        for j in range(nk):
+                            if alive[j]:
+                                a[i, j] -= c1 * a[io, j] + c2 * a[jo, j]
+    return npos, nneg, nzero
+
+
+def _factor(starts, diag, u, v, p, q, symmetric):
+    """Block LU of the quasiseparable matrix (chain_algebra's ``_factor_loops``), the inertia of
+    the symmetric case by :func:`_inertia_small` per pivot block:
+    ``(pinv, x, y, rcond_min, bad, npos, nneg, nzero)``."""
+    n, r = u.shape
+    s = q.shape[1]
+    bmax = diag.shape[1]
+    pinv = np.zeros_like(diag)
+    x = np.zeros((n, r))
+    y = np.zeros((n, s))
+    g = np.zeros((r, s))
+    ug = np.zeros((bmax, s))
+    pi = np.zeros((bmax, bmax))
+    work = np.zeros((bmax, 2 * bmax))
+    vt = np.zeros((bmax, r))
+    sm = np.zeros((bmax, bmax))
+    rc_min = np.inf
+    npos, nneg, nzero = 0, 0, 0
+    for k in range(starts.shape[0] - 1):
+        a, e = starts[k], starts[k + 1]
+        nk = e - a
+        for i in range(nk):
+            for c in range(s):
+                t = 0.0
+                for l in range(r):
+                    t += u[a + i, l] * g[l, c]
+                ug[i, c] = t
+        ref_d, ref_c, ref_p = 0.0, 0.0, 0.0
+        for i in range(nk):
+            rd, rcr = 0.0, 0.0
+            for j in range(nk):
+                t = 0.0
+                for c in range(s):
+                    t += ug[i, c] * q[a + j, c]
+                pi[i, j] = diag[a + i, j] - t
+                rd += abs(diag[a + i, j])
+                rcr += abs(t)
+            ref_d = max(ref_d, rd)
+            ref_c = max(ref_c, rcr)
+        if symmetric:
+            for i in range(nk):
+                for j in range(i + 1, nk):
+                    t = 0.5 * (pi[i, j] + pi[j, i])
+                    pi[i, j] = t
+                    pi[j, i] = t
+        for i in range(nk):
+            rp = 0.0
+            for j in range(nk):
+                rp += abs(pi[i, j])
+            ref_p = max(ref_p, rp)
+        ref = max(ref_d, max(ref_c, ref_p))
+        if symmetric:
+            for i in range(nk):
+                for j in range(nk):
+                    sm[i, j] = pi[i, j]
+            cp, cn, cz = _inertia_small(sm, nk, 1e-14 * nk * ref)
+            npos += cp
+            nneg += cn
+            nzero += cz
+        for i in range(nk):
+            for j in range(nk):
+                work[i, j] = pi[i, j]
+                work[i, nk + j] = 1.0 if i == j else 0.0
+        ok = True
+        for col in range(nk):
+            best, piv = -1.0, col
+            for i in range(col, nk):
+                if abs(work[i, col]) > best:
+                    best, piv = abs(work[i, col]), i
+            if not (best > 0.0) or not math.isfinite(best):
+                ok = False
+                break
+            if piv != col:
+                for j in range(2 * nk):
+                    t = work[col, j]
+                    work[col, j] = work[piv, j]
+                    work[piv, j] = t
+            dv = work[col, col]
+            for j in range(2 * nk):
+                work[col, j] /= dv
+            for i in range(nk):
+                if i != col:
+                    f = work[i, col]
+                    if f != 0.0:
+                        for j in range(2 * nk):
+                            work[i, j] -= f * work[col, j]
+        if not ok:
+            return pinv, x, y, 0.0, True, npos, nneg, nzero
+        inv_norm = 0.0
+        for i in range(nk):
+            ri = 0.0
+            for j in range(nk):
+                t = work[i, nk + j]
+                pinv[a + i, j] = t
+                ri += abs(t)
+            inv_norm = max(inv_norm, ri)
+        if not math.isfinite(inv_norm):
+            return pinv, x, y, 0.0, True, npos, nneg, nzero
+        rc = 1.0 / (inv_norm * ref) if ref > 0.0 else 0.0
+        rc_min = min(rc_min, rc)
+        for i in range(nk):
+            for l in range(r):
+                t = 0.0
+                for c in range(s):
+                    t += q[a + i, c] * g[l, c]
+                vt[i, l] = v[a + i, l] - t
+        for i in range(nk):
+            for l in range(r):
+                t = 0.0
+                for j in range(nk):
+                    t += pinv[a + j, i] * vt[j, l]
+                x[a + i, l] = t
+            for c in range(s):
+                t = 0.0
+                for j in range(nk):
+                    t += pinv[a + i, j] * (p[a + j, c] - ug[j, c])
+                y[a + i, c] = t
+        for l in range(r):
+            for c in range(s):
+                t = 0.0
+                for i in range(nk):
+                    t += vt[i, l] * y[a + i, c]
+                g[l, c] += t
+    return pinv, x, y, rc_min, False, npos, nneg, nzero
+
+
+def _solve(starts, pinv, u, x, y, q, b):
+    """``M⁻¹ b`` from :func:`_factor` (chain_algebra's ``_solve_loops``)."""
+    n, nc = b.shape
+    r, s = u.shape[1], q.shape[1]
+    bmax = pinv.shape[1]
+    z = np.empty((n, nc))
+    zk = np.empty((bmax, nc))
+    acc = np.zeros((r, nc))
+    nb = starts.shape[0] - 1
+    for k in range(nb):
+        a, e = starts[k], starts[k + 1]
+        nk = e - a
+        for i in range(nk):
+            for c in range(nc):
+                t = b[a + i, c]
+                for l in range(r):
+                    t -= u[a + i, l] * acc[l, c]
+                zk[i, c] = t
+        for l in range(r):
+            for c in range(nc):
+                t = 0.0
+                for i in range(nk):
+                    t += x[a + i, l] * zk[i, c]
+                acc[l, c] += t
+        for i in range(nk):
+            for c in range(nc):
+                t = 0.0
+                for j in range(nk):
+                    t += pinv[a + i, j] * zk[j, c]
+                z[a + i, c] = t
+    out = np.empty((n, nc))
+    acc2 = np.zeros((s, nc))
+    for k in range(nb - 1, -1, -1):
+        a, e = starts[k], starts[k + 1]
+        nk = e - a
+        for i in range(nk):
+            for c in range(nc):
+                t = z[a + i, c]
+                for l in range(s):
+                    t -= y[a + i, l] * acc2[l, c]
+                out[a + i, c] = t
+        for l in range(s):
+            for c in range(nc):
+                t = 0.0
+                for i in range(nk):
+                    t += q[a + i, l] * out[a + i, c]
+                acc2[l, c] += t
+    return out
+
+
+def _matvec(starts, diag, u, v, p, q, x):
+    """``W x`` for the quasiseparable ``W`` (chain_algebra's ``_matvec_loops``), x (n, c)."""
+    n, nc = x.shape
+    r, s = u.shape[1], q.shape[1]
+    y = np.zeros((n, nc))
+    acc = np.zeros((r, nc))
+    nb = starts.shape[0] - 1
+    for k in range(nb):
+        a, e = starts[k], starts[k + 1]
+        for i in range(a, e):
+            for c in range(nc):
+                t = 0.0
+                for j in range(a, e):
+                    t += diag[i, j - a] * x[j, c]
+                for l in range(r):
+                    t += u[i, l] * acc[l, c]
+                y[i, c] = t
+        for l in range(r):
+            for c in range(nc):
+                t = 0.0
+                for i in range(a, e):
+                    t += v[i, l] * x[i, c]
+                acc[l, c] += t
+    acc2 = np.zeros((s, nc))
+    for k in range(nb - 1, -1, -1):
+        a, e = starts[k], starts[k + 1]
+        for i in range(a, e):
+            for c in range(nc):
+                t = 0.0
+                for l in range(s):
+                    t += p[i, l] * acc2[l, c]
+                y[i, c] += t
+        for l in range(s):
+            for c in range(nc):
+                t = 0.0
+                for i in range(a, e):
+                    t += q[i, l] * x[i, c]
+                acc2[l, c] += t
+    return y
+
+
+def _shifted(bd, s, dpos, sigma):
+    """``bd`` with the chain diagonal shifted by ``−σ`` (scaled: ``−σ s_i²``)."""
+    out = bd.copy()
+    for i in range(s.shape[0]):
+        out[i, dpos[i]] -= sigma * s[i] * s[i]
+    return out
+
+
+def _raw_solve(bst, pinv, bu, fx, fy, bq, s, rho, c1, c2):
+    """The bordered solve mapped back: ``(x, λ)`` of ``(W − σI)x + Cᵀλ = c1``, ``Cx = c2``."""
+    n = s.shape[0]
+    k, nc = c2.shape
+    rhs = np.empty((n + k, nc))
+    for i in range(n):
+        for c in range(nc):
+            rhs[i, c] = c1[i, c] * s[i]
+    for i in range(k):
+        for c in range(nc):
+            rhs[n + i, c] = c2[i, c]
+    z = _solve(bst, pinv, bu, fx, fy, bq, rhs)
+    xs = np.empty((n, nc))
+    lam = np.empty((k, nc))
+    for i in range(n):
+        for c in range(nc):
+            xs[i, c] = z[i, c] * s[i]
+    for i in range(k):
+        for c in range(nc):
+            lam[i, c] = z[n + i, c] + rho * c2[i, c]
+    return xs, lam
+
+
+def _kkt_solve(starts, wd, wu, wv, wp, wq, cb, sigma, bst, pinv, bu, fx, fy, bq, s, rho, b1, b2, refine):
+    """:meth:`~vjm_pin.solver.chain_algebra.ChainKKT.solve`: ``(x, λ, relative residual)``."""
+    n = s.shape[0]
+    k, nc = b2.shape
+    xs, lam = _raw_solve(bst, pinv, bu, fx, fy, bq, s, rho, b1, b2)
+    jsmax = 0.0
+    for c in range(k):
+        for i in range(n):
+            jsmax = max(jsmax, abs(cb[c, i] * s[i]))
+    bmax = 0.0
+    for i in range(n):
+        for c in range(nc):
+            bmax = max(bmax, abs(b1[i, c] * s[i]))
+    for i in range(k):
+        for c in range(nc):
+            bmax = max(bmax, abs(b2[i, c]))
+    res = np.inf
+    r1 = np.empty((n, nc))
+    r2 = np.empty((k, nc))
+    for it in range(refine + 1):
+        wx = _matvec(starts, wd, wu, wv, wp, wq, xs)
+        num = 0.0
+        for i in range(n):
+            for c in range(nc):
+                t = wx[i, c] - sigma * xs[i, c]
+                for j in range(k):
+                    t += cb[j, i] * lam[j, c]
+                r1[i, c] = b1[i, c] - t
+                num = max(num, abs(r1[i, c] * s[i]))
+        for j in range(k):
+            for c in range(nc):
+                t = 0.0
+                for i in range(n):
+                    t += cb[j, i] * xs[i, c]
+                r2[j, c] = b2[j, c] - t
+                num = max(num, abs(r2[j, c]))
+        xm = 0.0
+        for i in range(n):
+            for c in range(nc):
+                xm = max(xm, abs(xs[i, c] / s[i]))
+        for j in range(k):
+            for c in range(nc):
+                xm = max(xm, abs(lam[j, c]))
+        den = xm * max(1.0, jsmax) + bmax
+        res = num / den if den > 0.0 else 0.0
+        if not math.isfinite(res):
+            res = np.inf
+            break
+        if it == refine or res < 1e-15:
+            break
+        dx, dl = _raw_solve(bst, pinv, bu, fx, fy, bq, s, rho, r1, r2)
+        xs += dx
+        lam += dl
+    return xs, lam, res
+
+
+def _count(bst, bd, bu, bv, bp, bq, s, dpos, k, sigma):
+    """Sturm count: eigenvalues of ``Zᵀ W_s Z`` below ``σ`` (−1 when not reliable), and the
+    factorisation at ``σ`` ``(pinv, x, y)``."""
+    sh = _shifted(bd, s, dpos, sigma)
+    pinv, fx, fy, rc, bad, npos, nneg, nzero = _factor(bst, sh, bu, bv, bp, bq, True)
+    if bad or not rc >= PIVOT_RCOND or npos < k or nneg < k or nzero > 0:
+        return -1, pinv, fx, fy
+    return nneg - k, pinv, fx, fy
+
+
+def _project(cb, v):
+    """``v`` minus its component in the row space of ``cb`` (Gram–Schmidt twice on the rows)."""
+    k, n = cb.shape
+    qr = np.zeros((k, n))
+    for c in range(k):
+        for i in range(n):
+            qr[c, i] = cb[c, i]
+        for _ in range(2):
+            for c2 in range(c):
+                t = 0.0
+                for i in range(n):
+                    t += qr[c2, i] * qr[c, i]
+                for i in range(n):
+                    qr[c, i] -= t * qr[c2, i]
+        nr = 0.0
+        for i in range(n):
+            nr += qr[c, i] * qr[c, i]
+        nr = math.sqrt(nr)
+        if nr > 0.0:
+            for i in range(n):
+                qr[c, i] /= nr
+    out = v.copy()
+    for _ in range(2):
+        for c in range(k):
+            t = 0.0
+            for i in range(n):
+                t += qr[c, i] * out[i]
+            for i in range(n):
+                out[i] -= t * qr[c, i]
+    return out
+
+
+def _rayleigh(starts, sd, su, sv, sp, sq, xv):
+    """``xᵀ W_s x / xᵀx`` for the symmetric part's generators."""
+    n = xv.shape[0]
+    wx = _matvec(starts, sd, su, sv, sp, sq, xv.reshape(n, 1))
+    num = 0.0
+    den = 0.0
+    for i in range(n):
+        num += xv[i] * wx[i, 0]
+        den += xv[i] * xv[i]
+    return num / den
+
+
+def _inverse(starts, sd, su, sv, sp, sq, bst, pinv, bu, fx, fy, bq, s, rho, k, lo, hi, start, atol, vtol):
+    """Inverse iteration at the shift ``lo`` (no eigenvalue below it): ``(ok, value, vector)``;
+    converged when the Rayleigh quotient has settled and the unit vector moves by at most
+    ``vtol`` in one iteration (its error is then ~``vtol·ρ``, ``ρ = (λ₁ − lo)/(λ₂ − lo)``)."""
+    n = s.shape[0]
+    v = start.copy()
+    nrm = math.sqrt(np.sum(v * v))
+    if not nrm > 0.0:
+        return False, 0.0, v
+    v /= nrm
+    prev = np.inf
+    zero = np.zeros((k, 1))
+    for _ in range(MAX_INVERSE):
+        xs, _ = _raw_solve(bst, pinv, bu, fx, fy, bq, s, rho, v.reshape(n, 1), zero)
+        x1 = xs[:, 0].copy()
+        nx = math.sqrt(np.sum(x1 * x1))
+        if not math.isfinite(nx) or nx == 0.0:
+            return False, 0.0, v
+        x1 /= nx
+        dot = 0.0
+        for i in range(n):
+            dot += x1[i] * v[i]
+        sg = 1.0 if dot >= 0.0 else -1.0
+        dv = 0.0
+        for i in range(n):
+            dv = max(dv, abs(x1[i] - sg * v[i]))
+        rq = _rayleigh(starts, sd, su, sv, sp, sq, x1)
+        if abs(rq - prev) <= 0.1 * (EIG_RTOL * abs(rq) + atol) and dv <= vtol:
+            ok = lo - atol <= rq <= hi + EIG_RTOL * abs(hi) + atol
+            return ok, rq, x1
+        prev = rq
+        v = x1
+    return False, prev, v
+
+
+def _split(lo, hi, frac, atol):
+    if lo < 0.0 < hi and frac == 0.5:
+        return 0.0
+    if lo >= 0.0 and hi > max(lo, atol):
+        a = max(lo, atol)
+        return a * (hi / a) ** frac
+    if hi <= 0.0 and -lo > max(-hi, atol):
+        a = max(-hi, atol)
+        return -a * (-lo / a) ** (1.0 - frac)
+    return lo + frac * (hi - lo)
+
+
+def _smallest(starts, dpos, kp, jz, f6, kd, cb, scale, has_guess, gvec, vtol):
+    """Smallest eigenvalue ``λ₁`` of ``Zᵀ W_s Z`` (``Z``: null space of ``cb``) and a unit
+    eigenvector (chain order): ``(ok, λ₁, vector)`` (module docstring). ``gvec``: a previous
+    eigenvector (length n; used when ``has_guess``); when the attempt from it fails (a mode
+    switch, no convergence, no certificate) the bracket is made from scratch."""
+    n = jz.shape[1]
+    k = cb.shape[0]
+    atol = 1e-13 * scale
+    sd, su, sv, sp, sq = _w_gens(jz, f6, starts, kd, True)
+    bst, bd, bu, bv, bp, bq, s, rho = _bordered(sd, su, sv, sp, sq, starts, dpos, kp, cb)
+    empty = np.zeros(n)
+    rnd = np.empty(n)
+    for i in range(n):  # a fixed pseudo-random start (the bisection path, a mixed-in component)
+        rnd[i] = math.sin(1.0 + 0.7 * i) + 0.3 * math.cos(2.3 * i)
+    rnd = _project(cb, rnd)
+    nr = math.sqrt(np.sum(rnd * rnd))
+    for attempt in range(2):
+        if attempt == 0 and not has_guess:
+            continue
+        lo, hi = 0.0, 0.0
+        have_lo = False
+        pinv_lo, fx_lo, fy_lo = bd, bu, bq  # placeholders (typed), replaced with the factor at lo
+        start = rnd.copy()
+        if attempt == 0:
+            g = _project(cb, gvec)
+            ng = math.sqrt(np.sum(g * g))
+            if not (ng > 0.0 and math.isfinite(ng) and nr > 0.0):
+                continue
+            g /= ng
+            hi = _rayleigh(starts, sd, su, sv, sp, sq, g)  # ≥ λ₁ (Courant–Fischer)
+            if not math.isfinite(hi):
+                continue
+            for i in range(n):
+                start[i] = g[i] + 1e-3 * rnd[i] / nr
+            delta = 0.02 * abs(hi) + 1e3 * atol
+            for _ in range(12):
+                sig = hi - delta
+                c, pinv_, fx_, fy_ = _count(bst, bd, bu, bv, bp, bq, s, dpos, k, sig)
+                if c == 0:
+                    lo, have_lo = sig, True
+                    pinv_lo, fx_lo, fy_lo = pinv_, fx_, fy_
+                    break
+                delta *= 4.0 if c > 0 else 1.001
+            if not have_lo:
+                continue
+        else:  # bracket from scratch and bisect to two digits
+            hi = scale
+            step = scale
+            found = False
+            for _ in range(64):
+                c, _p, _x, _y = _count(bst, bd, bu, bv, bp, bq, s, dpos, k, hi)
+                if c >= 1:
+                    found = True
+                    break
+                hi, step = (hi + step, 4.0 * step) if c == 0 else (hi + 1e-3 * step, step)
+            if not found:
+                return False, 0.0, empty
+            lo = -scale
+            step = -scale
+            found = False
+            for _ in range(64):
+                c, pinv_, fx_, fy_ = _count(bst, bd, bu, bv, bp, bq, s, dpos, k, lo)
+                if c == 0:
+                    found = True
+                    pinv_lo, fx_lo, fy_lo = pinv_, fx_, fy_
+                    break
+                lo, step = (lo + step, 4.0 * step) if c > 0 else (lo + 1e-3 * step, step)
+            if not found:
+                return False, 0.0, empty
+            while hi - lo > 1e-2 * max(abs(lo), abs(hi)) + atol:
+                c = -1
+                mid = lo
+                for frac in (0.5, 0.375, 0.625, 0.25, 0.75):
+                    mid = _split(lo, hi, frac, atol)
+                    c, pinv_, fx_, fy_ = _count(bst, bd, bu, bv, bp, bq, s, dpos, k, mid)
+                    if c >= 0:
+                        break
+                if c < 0:
+                    return False, 0.0, empty
+                if c >= 1:
+                    hi = mid
+                else:
+                    lo = mid
+                    pinv_lo, fx_lo, fy_lo = pinv_, fx_, fy_
+        ok, val, vec = _inverse(starts, sd, su, sv, sp, sq, bst, pinv_lo, bu, fx_lo, fy_lo, bq, s, rho, k, lo, hi,
+                                start, atol, vtol)
+        if not ok:
+            continue
+        # certify: no eigenvalue below the converged value (less its accuracy)
+        margin = 1e-9 * abs(val) + 1e2 * atol
+        for _ in range(6):
+            c, _p, _x, _y = _count(bst, bd, bu, bv, bp, bq, s, dpos, k, val - margin)
+            if c == 0:
+                return True, val, vec
+            if c > 0:
+                break
+            margin *= 10.0
+    return False, 0.0, empty
+
+
+def _qr_t(jac, m, n):
+    """Householder QR of ``Jᵀ`` exactly as :func:`vjm_pin.solver.kernel._iterate_loops` (``hh``:
+    reflector rows, last row τ)."""
+    hh = np.zeros((m + 1, n))
+    hh[:m, :] = jac
+    for k in range(m):
+        alpha = hh[k, k]
+        xn2 = 0.0
+        for i in range(k + 1, n):
+            xn2 += hh[k, i] * hh[k, i]
+        xnorm = math.sqrt(xn2)
+        if xnorm == 0.0:
+            hh[m, k] = 0.0
+        else:
+            beta = -math.copysign(math.hypot(alpha, xnorm), alpha)
+            t = (beta - alpha) / beta
+            hh[m, k] = t
+            scal = 1.0 / (alpha - beta)
+            for i in range(k + 1, n):
+                hh[k, i] *= scal
+            hh[k, k] = beta
+            for j in range(k + 1, m):
+                s = hh[j, k]
+                for i in range(k + 1, n):
+                    s += hh[j, i] * hh[k, i]
+                s *= t
+                hh[j, k] -= s
+                for i in range(k + 1, n):
+                    hh[j, i] -= s * hh[k, i]
+    return hh
+
+
+def _apply_qt(hh, v, m, n):
+    out = v.copy()
+    for k in range(m):
+        t = hh[m, k]
+        if t == 0.0:
+            continue
+        s = out[k]
+        for i in range(k + 1, n):
+            s += hh[k, i] * out[i]
+        s *= t
+        out[k] -= s
+        for i in range(k + 1, n):
+            out[i] -= s * hh[k, i]
+    return out
+
+
+def _moved(x, free, dx, flush):
+    xn = x.copy()
+    for c in range(free.shape[0]):
+        xn[free[c]] += dx[c]
+    if flush:
+        for i in range(xn.shape[0]):
+            if abs(xn[i]) < 1e-150:
+                xn[i] = 0.0
+    return xn
+
+
+def _hessian_dense(jfree, f6, mask, n):
+    """The (θ, q)-ordered Hessian of Ψ in screw form (the dense kernel's loop, same bits)."""
+    fx, fy, fz, mx, my, mz = f6[0], f6[1], f6[2], f6[3], f6[4], f6[5]
+    d = np.empty((3, n))
+    em = np.empty((3, n))
+    for b in range(n):
+        v0, v1, v2 = jfree[0, b], jfree[1, b], jfree[2, b]
+        w0, w1, w2 = jfree[3, b], jfree[4, b], jfree[5, b]
+        d[0, b] = fz * v1 - fy * v2
+        d[1, b] = -fz * v0 + fx * v2
+        d[2, b] = fy * v0 - fx * v1
+        em[0, b] = mz * w1 - my * w2
+        em[1, b] = -mz * w0 + mx * w2
+        em[2, b] = my * w0 - mx * w1
+    hz = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            if mask[i, j]:
+                hz[i, j] = (jfree[3, j] * d[0, i] + jfree[4, j] * d[1, i] + jfree[5, j] * d[2, i]
+                            + (em[0, i] * jfree[3, j] + em[1, i] * jfree[4, j] + em[2, i] * jfree[5, j]))
+            else:
+                hz[i, j] = jfree[3, i] * d[0, j] + jfree[4, i] * d[1, j] + jfree[5, i] * d[2, j]
+    return hz
+
+
+# --------------------------------------------------------------------------- the iteration
+def _iterate_chain(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, ci, cf, kz, mask, theta0, vscale,
+                   escale, cols, order, starts, dpos, kd, kp, kscale, klo, khi, has_guess, gvec):
+    """:func:`vjm_pin.solver.kernel._iterate_loops` with the O(n) chain algebra (module
+    docstring). Extra results: ``vec`` (the eigenvector of the verdict, chain order, status
+    CONVERGED). Status :data:`NEED_DENSE`: run the dense kernel instead."""
+    n, nt, m, nip, nir = ci[0], ci[1], ci[2], ci[3], ci[4]
+    free = ci[6:6 + n]
+    theta_idx = ci[6 + n:6 + n + nt]
+    task = ci[6 + n + nt:6 + n + nt + m]
+    ip = ci[6 + n + nt + m:6 + n + nt + m + nip]
+    ir = ci[6 + n + nt + m + nip:6 + n + nt + m + nip + nir]
+    tol, tol_p, kscale_c, stat_floor, shift, max_step = cf[0], cf[1], cf[2], cf[3], cf[4], cf[5]
+    follow, polish_step, rank_tol = cf[6] != 0.0, cf[7], cf[8]
+    fact_in = fact
+    empty = fact_in[3]
+    novec = np.zeros(0)
+    if refactor:
+        hh = np.zeros((m + 7, n))
+        for a_ in range(6):
+            for b in range(n):
+                hh[m + 1 + a_, b] = J6[a_, free[b]]
+        jfree = hh[m + 1:, :]
+        jac = np.empty((m, n))
+        for i in range(m):
+            jac[i, :] = jfree[task[i], :]
+        tau = np.zeros(n)
+        for i in range(nt):
+            s = 0.0
+            for j in range(klo[i], khi[i]):
+                s += kz[i, j] * (x[theta_idx[j]] - theta0[j])
+            tau[i] = s
+        hq = _qr_t(jac, m, n)
+        hh[:m + 1, :] = hq
+        rr = np.zeros((m, m))
+        for i in range(m):
+            for j in range(i, m):
+                rr[i, j] = hh[j, i]
+        qt = _apply_qt(hh, tau, m, n)
+        f = np.zeros(m)
+        for i in range(m):
+            if rr[i, i] == 0.0:
+                return _FACTOR_FAIL, 0.0, 0.0, 0.0, 0.0, fact, empty, empty, empty, novec
+        for i in range(m - 1, -1, -1):
+            s = qt[i]
+            for j in range(i + 1, m):
+                s -= rr[i, j] * f[j]
+            f[i] = s / rr[i, i]
+        r = tau.copy()
+        for c in range(n):
+            s = 0.0
+            for i in range(m):
+                s += jac[i, c] * f[i]
+            r[c] -= s
+        f6 = np.zeros(6)
+        for i in range(m):
+            f6[task[i]] = f[i]
+        hz = _hessian_dense(jfree, f6, mask, n) if keep else fact_in[6]
+        fact = (jac, hh, rr, f, r, tau, hz, f6)
+    jac, hh, rr, f, r, tau, hz, f6 = fact
+    if hh.shape[0] != m + 7:  # a factorisation by the dense kernel: no Jacobian rows here
+        return NEED_DENSE, 0.0, 0.0, 0.0, 0.0, fact_in, empty, empty, empty, novec
+    jfree = hh[m + 1:, :]
+    e = np.empty(m)
+    for i in range(m):
+        t_ = task[i]
+        e[i] = cf[9 + t_] - pos[t_] if t_ < 3 else erot[t_ - 3]
+    ep = 0.0
+    for i in ip:
+        ep = max(ep, abs(e[i]))
+    er = 0.0
+    for i in ir:
+        er = max(er, abs(e[i]))
+    rs = 0.0
+    r2 = 0.0
+    taumax = 0.0
+    for c in range(n):
+        rs = max(rs, abs(r[c]))
+        r2 += r[c] * r[c]
+        taumax = max(taumax, abs(tau[c]))
+    es2 = 0.0
+    for i in range(m):
+        es2 += (e[i] / escale[i]) ** 2
+    kkt = math.sqrt(es2) + math.sqrt(r2) / kscale_c
+    converged = ep <= 0.01 * tol_p and er <= 0.01 * tol and rs <= tol * max(taumax, stat_floor)
+    # chain order: Jacobian columns, task rows
+    jz = np.empty((6, n))
+    for c in range(n):
+        for a_ in range(6):
+            jz[a_, c] = jfree[a_, order[c]]
+    cb = np.empty((m, n))
+    for i in range(m):
+        for c in range(n):
+            cb[i, c] = jz[task[i], c]
+    if not converged or polish_left:
+        wd, wu, wv, wp, wq = _w_gens(jz, f6, starts, kd, False)
+        bst, bd, bu, bv, bp, bq, s_, rho = _bordered(wd, wu, wv, wp, wq, starts, dpos, kp, cb)
+        pinv, fx, fy, rc, bad, _a, _b, _c = _factor(bst, bd, bu, bv, bp, bq, False)
+        if bad or not rc >= TRUST_RCOND:
+            return NEED_DENSE, kkt, ep, er, rs, fact_in, empty, empty, empty, novec
+        b1 = np.empty((n, 1))
+        for c in range(n):
+            b1[c, 0] = -r[order[c]]
+        b2 = np.empty((m, 1))
+        for i in range(m):
+            b2[i, 0] = e[i]
+        xs, _lam, res = _kkt_solve(starts, wd, wu, wv, wp, wq, cb, 0.0, bst, pinv, bu, fx, fy, bq, s_, rho, b1, b2, 2)
+        if not res <= SOLVE_RTOL:
+            return NEED_DENSE, kkt, ep, er, rs, fact_in, empty, empty, empty, novec
+        dx = np.empty(n)
+        for c in range(n):
+            dx[order[c]] = xs[c, 0]
+        if not converged:
+            if follow:  # ½(ZᵀWZ + (ZᵀWZ)ᵀ) − shift·I ≻ 0: no eigenvalue of Zᵀ W_s Z at or below shift
+                sd, su, sv, sp, sq = _w_gens(jz, f6, starts, kd, True)
+                bst2, bd2, bu2, bv2, bp2, bq2, s2, _rho2 = _bordered(sd, su, sv, sp, sq, starts, dpos, kp, cb)
+                cnt, _p, _x, _y = _count(bst2, bd2, bu2, bv2, bp2, bq2, s2, dpos, m, shift)
+                if cnt < 0:
+                    return NEED_DENSE, kkt, ep, er, rs, fact_in, empty, empty, empty, novec
+                if cnt > 0:
+                    return _STEP_FAIL, kkt, ep, er, rs, fact if keep else fact_in, empty, empty, empty, novec
+            smax = 0.0
+            for c in range(n):
+                v = abs(dx[c] / vscale[c])
+                if not v <= smax:
+                    smax = v
+            if not smax <= max_step:
+                return _STEP_FAIL, kkt, ep, er, rs, fact if keep else fact_in, empty, empty, empty, novec
+            return (_CONTINUE, kkt, ep, er, rs, fact if keep else fact_in, dx if keep else empty,
+                    _moved(x, free, dx, flush), empty, novec)
+        finite = True
+        smax = 0.0
+        for c in range(n):
+            if not math.isfinite(dx[c]):
+                finite = False
+            smax = max(smax, abs(dx[c] / vscale[c]))
+        if finite and smax > polish_step:
+            return (_POLISH, kkt, ep, er, rs, fact if keep else fact_in, dx if keep else empty,
+                    _moved(x, free, dx, flush), empty, novec)
+    ru = np.zeros((m, m))
+    for i in range(m):
+        for j in range(i, m):
+            if not math.isfinite(rr[i, j]):
+                return _RANK_FAIL, kkt, ep, er, rs, fact if keep else fact_in, empty, empty, empty, novec
+            ru[i, j] = rr[i, j]
+    sv_ = np.linalg.svd(ru)[1]
+    if not sv_[m - 1] > rank_tol * sv_[0]:
+        return _RANK_FAIL, kkt, ep, er, rs, fact if keep else fact_in, empty, empty, empty, novec
+    ok, lam1, vec = _smallest(starts, dpos, kp, jz, f6, kd, cb, kscale, has_guess, gvec, VEC_TOL_VERDICT)
+    if not ok:
+        return NEED_DENSE, kkt, ep, er, rs, fact_in, empty, empty, empty, novec
+    ev = np.empty(1)
+    ev[0] = -lam1
+    if refactor and not keep:
+        fact = (jac, hh, rr, f, r, tau, _hessian_dense(jfree, f6, mask, n), f6)
+    return _CONVERGED, kkt, ep, er, rs, fact, empty, empty, ev, vec
+
+
+# --------------------------------------------------------------------------- the point
+def _point_chain(J6, cols, order, task, dt, prow, starts, dpos, kd, kp, kscale, wrench, use_rate, fast_rank,
+                 has_guess, gvec):
+    """:func:`vjm_pin.analysis.point_kernel._point_loops` with the O(n) chain algebra:
+    ``(status, k, δx ((θ, q) order), δF, μ, dμ/ds, eigenvector (chain order))``; status
+    :data:`NEED_DENSE`: run the dense kernel (which decides, as before)."""
+    n = cols.shape[0]
+    m = task.shape[0]
+    nan = np.nan
+    xd = np.zeros(n)
+    fd = np.zeros(m)
+    novec = np.zeros(0)
+    if m < 2 or m > n:
+        return NEED_DENSE, nan, xd, fd, nan, nan, novec
+    jz = np.empty((6, n))
+    for c in range(n):
+        for a_ in range(6):
+            jz[a_, c] = J6[a_, cols[c]]
+    cb = np.empty((m, n))
+    for i in range(m):
+        for c in range(n):
+            cb[i, c] = jz[task[i], c]
+    # rank test of J (FAST_RANK) and its QR for the multiplier g
+    hh = _qr_t(cb, m, n)
+    rmat = np.zeros((m, m))
+    for i in range(m):
+        for j in range(i, m):
+            rmat[i, j] = hh[j, i]
+            if not math.isfinite(hh[j, i]):
+                return NEED_DENSE, nan, xd, fd, nan, nan, novec
+    sv = np.linalg.svd(rmat)[1]
+    if not sv[m - 1] > fast_rank * sv[0]:
+        return NEED_DENSE, nan, xd, fd, nan, nan, novec
+    # tangent of eq. (29): W δx − Jᵀ δF = 0, J δx = d_t
+    wd, wu, wv, wp, wq = _w_gens(jz, wrench, starts, kd, False)
+    bst, bd, bu, bv, bp, bq, s_, rho = _bordered(wd, wu, wv, wp, wq, starts, dpos, kp, cb)
+    pinv, fx, fy, rc, bad, _a, _b, _c = _factor(bst, bd, bu, bv, bp, bq, False)
+    if bad or not rc >= TRUST_RCOND:
+        return NEED_DENSE, nan, xd, fd, nan, nan, novec
+    b1 = np.zeros((n, 1))
+    b2 = np.empty((m, 1))
+    for i in range(m):
+        b2[i, 0] = dt[i]
+    xs, lam, res = _kkt_solve(starts, wd, wu, wv, wp, wq, cb, 0.0, bst, pinv, bu, fx, fy, bq, s_, rho, b1, b2, 2)
+    if not res <= SOLVE_RTOL:
+        return NEED_DENSE, nan, xd, fd, nan, nan, novec
+    k = 0.0
+    for i in range(m):
+        fd[i] = -lam[i, 0]
+        k += dt[i] * fd[i]
+    for c in range(n):
+        xd[order[c]] = xs[c, 0]
+        if not math.isfinite(xs[c, 0]):
+            return NEED_DENSE, nan, xd, fd, nan, nan, novec
+    # μ: the largest eigenvalue of Vᵀ sym(H − K) V, V the null space of P J: −λ₁
+    kh = prow.shape[0]
+    ch = np.zeros((kh, n))
+    for a_ in range(kh):
+        for i in range(m):
+            pa = prow[a_, i]
+            for c in range(n):
+                ch[a_, c] += pa * cb[i, c]
+    ok, lam1, w = _smallest(starts, dpos, kp, jz, wrench, kd, ch, kscale, has_guess, gvec, VEC_TOL_MARGIN)
+    if not ok:
+        return NEED_DENSE, nan, xd, fd, nan, nan, novec
+    mu = -lam1
+    if not use_rate:
+        return 0, k, xd, fd, mu, nan, w
+    # dμ/ds = wᵀH'w − 2 gᵀJ'w (PointKernel.margin_rate), chain order, O(n)
+    sd, su, svv, sp, sq = _w_gens(jz, wrench, starts, kd, True)
+    wsw = _matvec(starts, sd, su, svv, sp, sq, w.reshape(n, 1))
+    resv = np.empty(n)
+    for c in range(n):
+        resv[c] = -(wsw[c, 0] - lam1 * w[c])  # sym(H − K) w − μ w
+    yr = _apply_qt(hh, resv, m, n)
+    g = np.zeros(m)
+    for i in range(m - 1, -1, -1):
+        s = yr[i]
+        for j in range(i + 1, m):
+            s -= rmat[i, j] * g[j]
+        g[i] = s / rmat[i, i]
+    xc = np.empty(n)
+    for c in range(n):
+        xc[c] = xs[c, 0]
+    om = np.empty((n, 3))
+    li = np.empty((n, 3))
+    for c in range(n):
+        for a3 in range(3):
+            li[c, a3] = jz[a3, c]
+            om[c, a3] = jz[3 + a3, c]
+    dom = np.empty((n, 3))
+    dli = np.empty((n, 3))
+    # Ω_i = Σ_{j≤i} δx_j ω_j (prefix), P_i = Σ_{j>i} δx_j v_j (suffix)
+    pre = np.zeros((n, 3))
+    o0, o1, o2 = 0.0, 0.0, 0.0
+    for i in range(n):
+        o0 += xc[i] * om[i, 0]
+        o1 += xc[i] * om[i, 1]
+        o2 += xc[i] * om[i, 2]
+        pre[i, 0], pre[i, 1], pre[i, 2] = o0, o1, o2
+    p0, p1, p2 = 0.0, 0.0, 0.0
+    for i in range(n - 1, -1, -1):
+        o0, o1, o2 = pre[i, 0], pre[i, 1], pre[i, 2]
+        dom[i, 0] = o1 * om[i, 2] - o2 * om[i, 1]
+        dom[i, 1] = o2 * om[i, 0] - o0 * om[i, 2]
+        dom[i, 2] = o0 * om[i, 1] - o1 * om[i, 0]
+        dli[i, 0] = o1 * li[i, 2] - o2 * li[i, 1] + om[i, 1] * p2 - om[i, 2] * p1
+        dli[i, 1] = o2 * li[i, 0] - o0 * li[i, 2] + om[i, 2] * p0 - om[i, 0] * p2
+        dli[i, 2] = o0 * li[i, 1] - o1 * li[i, 0] + om[i, 0] * p1 - om[i, 1] * p0
+        p0 += xc[i] * li[i, 0]
+        p1 += xc[i] * li[i, 1]
+        p2 += xc[i] * li[i, 2]
+    wdot = np.zeros(6)
+    for i in range(m):
+        wdot[task[i]] = fd[i]
+    f0, f1, f2, m0, m1, m2 = wrench[0], wrench[1], wrench[2], wrench[3], wrench[4], wrench[5]
+    g0, g1, g2, n0, n1, n2 = wdot[0], wdot[1], wdot[2], wdot[3], wdot[4], wdot[5]
+    aa = np.empty((n, 3))
+    da = np.empty((n, 3))
+    bb = np.empty((n, 3))
+    db = np.empty((n, 3))
+    for c in range(n):
+        v0, v1, v2 = li[c, 0], li[c, 1], li[c, 2]
+        w0_, w1_, w2_ = om[c, 0], om[c, 1], om[c, 2]
+        dv0, dv1, dv2 = dli[c, 0], dli[c, 1], dli[c, 2]
+        dw0, dw1, dw2 = dom[c, 0], dom[c, 1], dom[c, 2]
+        b0 = v1 * f2 - v2 * f1
+        b1_ = v2 * f0 - v0 * f2
+        b2_ = v0 * f1 - v1 * f0
+        bb[c, 0], bb[c, 1], bb[c, 2] = b0, b1_, b2_
+        aa[c, 0] = b0 + w1_ * m2 - w2_ * m1
+        aa[c, 1] = b1_ + w2_ * m0 - w0_ * m2
+        aa[c, 2] = b2_ + w0_ * m1 - w1_ * m0
+        e0 = dv1 * f2 - dv2 * f1 + v1 * g2 - v2 * g1
+        e1 = dv2 * f0 - dv0 * f2 + v2 * g0 - v0 * g2
+        e2 = dv0 * f1 - dv1 * f0 + v0 * g1 - v1 * g0
+        db[c, 0], db[c, 1], db[c, 2] = e0, e1, e2
+        da[c, 0] = e0 + dw1 * m2 - dw2 * m1 + w1_ * n2 - w2_ * n1
+        da[c, 1] = e1 + dw2 * m0 - dw0 * m2 + w2_ * n0 - w0_ * n2
+        da[c, 2] = e2 + dw0 * m1 - dw1 * m0 + w0_ * n1 - w1_ * n0
+    # quad = Σ_i w_i [Σ_{j≤i} (dom_j·aa_i + om_j·da_i) w_j + Σ_{j>i} (dom_i·bb_j + om_i·db_j) w_j]
+    quad = 0.0
+    s1 = np.zeros(3)
+    s2 = np.zeros(3)
+    for i in range(n):
+        for a3 in range(3):
+            s1[a3] += w[i] * dom[i, a3]
+            s2[a3] += w[i] * om[i, a3]
+        quad += w[i] * (aa[i, 0] * s1[0] + aa[i, 1] * s1[1] + aa[i, 2] * s1[2]
+                        + da[i, 0] * s2[0] + da[i, 1] * s2[1] + da[i, 2] * s2[2])
+    t1 = np.zeros(3)
+    t2 = np.zeros(3)
+    for i in range(n - 1, -1, -1):
+        quad += w[i] * (dom[i, 0] * t1[0] + dom[i, 1] * t1[1] + dom[i, 2] * t1[2]
+                        + om[i, 0] * t2[0] + om[i, 1] * t2[1] + om[i, 2] * t2[2])
+        for a3 in range(3):
+            t1[a3] += w[i] * bb[i, a3]
+            t2[a3] += w[i] * db[i, a3]
+    jw = np.zeros(6)
+    for c in range(n):
+        for a3 in range(3):
+            jw[a3] += dli[c, a3] * w[c]
+            jw[3 + a3] += dom[c, a3] * w[c]
+    lin = 0.0
+    for i in range(m):
+        lin += g[i] * jw[task[i]]
+    return 0, k, xd, fd, mu, quad - 2.0 * lin, w
+
+
+# =========================================================================== loading, layout
+_COMPILED: list = []  # [(iterate, point)] once loaded, [None] when numba is unavailable
+_HELPERS = ("_w_gens", "_bordered", "_inertia_small", "_factor", "_solve", "_matvec", "_shifted", "_raw_solve",
+            "_kkt_solve", "_count", "_project", "_rayleigh", "_inverse", "_split", "_smallest", "_qr_t",
+            "_apply_qt", "_moved", "_hessian_dense")
+
+
+def _load():
+    """``(iterate, point)`` compiled by numba (cached on disk), or None without numba."""
+    if _COMPILED:
+        return _COMPILED[0]
+    try:
+        import numba
+    except Exception:  # noqa: BLE001 - any import failure: the dense kernels stay in use
+        _COMPILED.append(None)
+        return None
+    opts = {"cache": True, "nogil": True}
+    g = globals()
+    for name in _HELPERS:
+        g[name] = numba.njit(**opts)(g[name])
+    _COMPILED.append((numba.njit(**opts)(_iterate_chain), numba.njit(**opts)(_point_chain)))
+    return _COMPILED[0]
+
+
+class _Layout:
+    """Per-model constants in chain order (from ``K_θ`` in (θ, q) order and the free columns)."""
+
+    __slots__ = ("cols", "dpos", "kd", "khi", "klo", "kp", "kscale", "ok", "order", "starts")
+
+    def __init__(self, kz, free, nt, mask):
+        from vjm_pin.solver.chain_algebra import chain_layout
+
+        free = np.asarray(free, np.int64)
+        lay = chain_layout(np.ascontiguousarray(kz[:nt, :nt]), free[:nt], free[nt:])
+        self.cols = np.ascontiguousarray(lay.cols, np.int64)
+        self.order = np.ascontiguousarray(lay.order, np.int64)
+        self.starts = np.ascontiguousarray(lay.starts, np.int64)
+        self.kd = np.ascontiguousarray(lay.k_diag, float)
+        self.kp = np.ascontiguousarray(lay._k_pinv, float)
+        blk = lay.block_ids()
+        self.dpos = np.ascontiguousarray(np.arange(lay.n) - lay.starts[blk], np.int64)
+        self.kscale = float(np.abs(lay.k_diag).max(initial=0.0)) or 1.0
+        n = len(free)
+        nzr = kz[:nt, :nt] != 0
+        any_ = nzr.any(axis=1)
+        self.klo = np.where(any_, np.argmax(nzr, axis=1), 0).astype(np.int64)
+        self.khi = np.where(any_, nt - np.argmax(nzr[:, ::-1], axis=1), 0).astype(np.int64)
+        # the chain form needs the support of every free column to be its predecessors in chain order
+        if mask is None:
+            self.ok = True
+        else:
+            mc = np.asarray(mask, bool)[np.ix_(self.order, self.order)]
+            self.ok = bool(np.array_equal(mc, np.tril(np.ones((n, n), bool))))
+
+
+_LAYOUTS: dict = {}
+
+
+def _layout(key_obj, kz, free, nt, mask) -> _Layout:
+    hit = _LAYOUTS.get(id(key_obj))
+    if hit is not None and hit[0] is key_obj:
+        return hit[1]
+    lay = _Layout(kz, free, nt, mask)
+    if len(_LAYOUTS) >= 32:
+        _LAYOUTS.pop(next(iter(_LAYOUTS)))
+    _LAYOUTS[id(key_obj)] = (key_obj, lay)
+    return lay
+
+
+# =========================================================================== entry points
+_PROWS: dict = {}  # id(point kernel) -> (point kernel, (m − 1, m) rows spanning the complement of d_t)
+_GUESS: dict = {}  # id(key object) -> (key object, previous eigenvector in chain order)
+
+
+def _guess(key_obj, n):
+    hit = _GUESS.get(id(key_obj))
+    if hit is not None and hit[0] is key_obj and hit[1].shape[0] == n:
+        return True, hit[1]
+    return False, np.zeros(n)
+
+
+def _remember(key_obj, vec):
+    if len(_GUESS) >= 64:
+        _GUESS.pop(next(iter(_GUESS)))
+    _GUESS[id(key_obj)] = (key_obj, vec)
+
+
+def iterate(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, consts, dense):
+    """One fused iteration (the contract of :func:`vjm_pin.solver.kernel.iterate_numpy`) by the
+    compiled chain kernel; ``dense`` (the dense kernel, same signature without ``dense``) where
+    the chain result is not trustworthy or the model is not a plain chain. At status CONVERGED
+    ``ev`` holds the largest eigenvalue of eq. (23) only (the one the verdict and the curve's
+    ``λ`` use), not all of them."""
+    fns = _load()
+    ci, cf, kz, mask, theta0, vscale, escale = consts
+    n, nt = int(ci[0]), int(ci[1])
+    lay = _layout(ci, kz, ci[6:6 + n], nt, mask)
+    if fns is None or not lay.ok:
+        return dense(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, consts)
+    has, gvec = _guess(ci, n)
+    out = fns[0](J6, pos, erot, x, refactor, polish_left, flush, keep, fact, ci, cf, kz, mask, theta0, vscale,
+                 escale, lay.cols, lay.order, lay.starts, lay.dpos, lay.kd, lay.kp, lay.kscale, lay.klo, lay.khi,
+                 has, gvec)
+    if out[0] == NEED_DENSE:
+        return dense(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, consts)
+    if out[0] == _kernel.CONVERGED:
+        _remember(ci, out[9])
+    return out[:9]
+
+
+def point(pk, b, mask, wrench, fast_rank):
+    """The compiled :meth:`~vjm_pin.analysis.point_kernel.PointKernel.point` by the chain
+    kernel: ``(k, δx, δF, μ, dμ/ds or None)``, or None where the dense kernel must decide (not a
+    plain chain, a near-critical factorisation, an eigenvalue not certified)."""
+    fns = _load()
+    if fns is None or pk.m < 2:
+        return None
+    lay = _layout(pk.kz, pk.kz, pk.free, pk.nt, mask)
+    if not lay.ok:
+        return None
+    hit = _PROWS.get(id(pk))
+    if hit is None or hit[0] is not pk:
+        dt = pk.dt.reshape(-1, 1) / np.linalg.norm(pk.dt)  # rows spanning the complement of d_t
+        hit = (pk, np.ascontiguousarray(np.linalg.svd(dt, full_matrices=True)[0][:, 1:].T))
+        if len(_PROWS) >= 32:
+            _PROWS.pop(next(iter(_PROWS)))
+        _PROWS[id(pk)] = hit
+    prow = hit[1]
+    rate_wanted = mask is not None
+    has, gvec = _guess(pk, lay.cols.shape[0])
+    st, k, xd, fd, mu, rate, vec = fns[1](
+        np.ascontiguousarray(b.state.jacobian, dtype=float), lay.cols, lay.order, pk.task.astype(np.int64), pk.dt,
+        prow, lay.starts, lay.dpos, lay.kd, lay.kp, lay.kscale,
+        np.asarray(wrench if wrench is not None else np.zeros(6), dtype=float), rate_wanted, float(fast_rank), has,
+        gvec,
+    )
+    if st != 0:
+        return None
+    _remember(pk, vec)
+    return k, xd, fd, mu, (rate if rate_wanted else None)
