@@ -17,6 +17,11 @@ continuation: the tangent predictor of eq. (29) (``δq = K_q δt``, ``δθ = K_�
 ``δF = K_C δt`` with ``δt = δs·d``; optionally, ``_second_order``, along the followed branch
 plus the term ``½δs²·(t_a − t_prev)/(s_a − s_prev)`` from the tangents of the last two points,
 error O(δs³)), a plain Newton corrector, and adaptive sub-steps inside every requested step.
+The common sub-step (a warm start from the prediction that the solver's plain local iteration
+settles) runs as one lean pass, :meth:`_Tracer._fused_step`: the solver's fused Newton kernel
+(``EquilibriumSolver._corrector``) and the point kernel on the converged iteration's own ``J`` and
+``H(F)``, the per-solve set-up done once per curve; anything else takes the general solve and point
+path, and both give the same numbers (``tests/test_curve_corrector.py``).
 A sub-step is accepted only when the corrected configuration stays
 close to the prediction (``‖x − x_pred‖ ≤`` :data:`CORRECTOR_RATIO` ``·‖x_pred − x_a‖``,
 scaled by rad and the chain length, the prediction itself at most :data:`MAX_MOVE`), and
@@ -78,18 +83,21 @@ branch at ``s_c ∓ ε``, ``ε = max(`` :data:`OFFSET_REL` ``·|s_c|,`` :data:`O
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from vjm_pin.analysis.point_kernel import PointKernel, compiled, use_compiled
+from vjm_pin.analysis import point_kernel as _pk
+from vjm_pin.analysis.point_kernel import FAST_RANK, PointKernel, _jit_mode, compiled, use_compiled
 from vjm_pin.exceptions import InputError, NoEquilibrium, SingularStiffness
+from vjm_pin.kinematics.chain import displace as _displace
 from vjm_pin.kinematics.chain import flush_tiny
 from vjm_pin.kinematics.dead_loads import Load
 from vjm_pin.model.format import VjmModel
 from vjm_pin.model.task import task_vector
-from vjm_pin.solver.equilibrium import EquilibriumResult, EquilibriumSolver
+from vjm_pin.solver.equilibrium import EquilibriumResult, EquilibriumSolver, _frozen
 from vjm_pin.solver.mechanism import MechanismSolver
 from vjm_pin.solver.stability import (
     RANK_TOL,
@@ -99,7 +107,7 @@ from vjm_pin.solver.stability import (
     reduced_matrix,
     spectral_norm,
 )
-from vjm_pin.solver.stiffness import stiffness_from_blocks
+from vjm_pin.solver.stiffness import SINGULAR_RCOND, stiffness_from_blocks
 from vjm_pin.solver.threads import one_blas_thread
 
 #: Maximum iterations of a root or extremum search (Illinois).
@@ -123,6 +131,8 @@ MAX_MOVE = 0.1
 MIN_STEP = 1e-10
 #: Largest recursion depth of the check for two crossings within one sub-step.
 DIP_DEPTH = 12
+#: :meth:`_Tracer._fused_step`'s answer "the local iteration gave way: go on as the general path".
+_GENERAL = object()
 
 #: Private switch (False: every point by the generic eq. 30 inverse and the SVD null space of
 #: check_stability_held, as released; for the side-by-side benchmark and the tests).
@@ -133,6 +143,10 @@ _analytic_rate = True
 #: ``_fast_points``; off by default: it halves the Newton iterations past buckling but was not
 #: measurably faster per point, and it moves the equilibria within the solver's tolerance).
 _second_order = False
+#: Private switch (False: every continuation sub-step by the general solve and point path,
+#: ``EquilibriumSolver._solve_local`` then :meth:`_Tracer.point`; True: the fused warm corrector of
+#: :meth:`_Tracer._fused_step`, the same numbers; for the tests and the benchmark).
+_fused_corrector = True
 #: The second-order predictor term of a sub-step ``ds`` uses the tangent of the point continued
 #: from when that point lies at least this × ``|ds|`` behind (a shorter difference quotient of
 #: the tangent is dominated by rounding).
@@ -412,6 +426,16 @@ class _Tracer:
         self._zero_x = np.zeros(vm.model.nq)  # templates of the tangent (δx, δF) of a point
         self._zero_w = np.zeros(6)
         self.second_order = _fast_points and _second_order  # the predictor (step)
+        # the fused warm corrector (_fused_step): the solver's per-curve bundle, VJM_PIN_JIT read once
+        self._corr = self.cont._corrector_context() if _fast_points and _fused_corrector else None
+        self._jit = _jit_mode() if self._corr is not None else None
+        self._pargs = None  # the compiled point kernel's constant arguments (_fused_step)
+        self._rt = None  # (rotation part of the last target, its target rotation) (_fused_step)
+        self._dense_point = False  # the compiled dense point kernel applies (PointKernel.point's dispatch)
+        if self._corr is not None:
+            from vjm_pin.solver import chain_kernel
+
+            self._dense_point = len(self.free) < getattr(chain_kernel, "POINT_MIN_N", 0)
 
     # ------------------------------------------------------------------ evaluation
     def blocks(self, x, w):
@@ -509,7 +533,7 @@ class _Tracer:
                     dx = dx + c * (t[0] - h[1])
                     dw = dw + c * (t[1] - h[2])
             x_pred = flush_tiny(a.eq.x + dx)  # no subnormal coordinates (FLUSH_BELOW)
-            w_pred = a.eq.wrench + dw
+            w_pred = None  # a.eq.wrench + dw, when the general solve needs it
             move = self.scaled(x_pred - a.eq.x)
             if move > MAX_MOVE:  # checked before the corrector: a rejected prediction costs no solve
                 return None
@@ -517,10 +541,18 @@ class _Tracer:
             x_pred, w_pred = a.eq.x.copy(), a.eq.wrench.copy()
             move = 0.0
         target = s * self.d
-        eq = self.cont._solve_local(target, x_pred)
+        if t is not None and self._corr is not None:
+            got = self._fused_step(a, s, target, x_pred, move, t)
+            if got is not _GENERAL:
+                return got
+            eq = None  # the local iteration gave way: as _solve_local returning None
+        else:
+            eq = self.cont._solve_local(target, x_pred)
         if eq is None:
             if abs(ds) > 1e-4 * self.range and len(self.vm.task) < len(self.free):
                 return None  # a shorter step first: the safeguarded path is costly
+            if w_pred is None:
+                w_pred = a.eq.wrench + dw
             try:
                 eq = self.cont.solve(
                     target, x0=x_pred, wrench0=w_pred, raise_on_failure=False, fast_fail=True
@@ -539,6 +571,73 @@ class _Tracer:
         p = self.point(eq, s)
         if t is not None:
             p.hist = (a.s, t[0], t[1])
+        return p
+
+    def _point_fn(self):
+        """The compiled point kernel when wanted (:meth:`point`'s rule, ``VJM_PIN_JIT`` as read at
+        the start of the curve), else None."""
+        if self._fn is None:
+            md = self._jit
+            wanted = md == "1" or (md == "auto" and ("numba" in sys.modules or _pk._compiled))
+            if wanted and use_compiled(self._npts):
+                self._fn = compiled()
+        return self._fn or None
+
+    def _fused_step(self, a: _BP, s: float, target, x_pred, move: float, t):
+        """:meth:`step`'s corrector and point in one lean pass (the common step of a curve): the
+        solver's fused local iteration from the prediction (``EquilibriumSolver._corrector``, the
+        iterations of ``_solve_local``), the continuity check, then the point kernel on the
+        converged iteration's own ``J`` and ``H(F)`` (no Blocks, no re-validation). Returns the
+        point, None (the corrector strayed: the step is rejected, as :meth:`step`), or
+        :data:`_GENERAL` when the local iteration gave way (the caller goes on as after
+        ``_solve_local`` returned None). Every number is that of the general path; a point the
+        compiled point kernel declines goes through :meth:`point` (its generic path)."""
+        solver = self.cont
+        rt = self._rt
+        if rt is not None and rt[0] == target[3:].tobytes():  # displace(p0, r0, target), its rotation kept
+            p_t, r_t = solver.p0 + target[:3], rt[1]
+        else:
+            p_t, r_t = _displace(solver.p0, solver.r0, target)
+            self._rt = (target[3:].tobytes(), r_t)
+        raw = solver._corrector(self._corr, p_t, r_t, x_pred, flushed=True)  # (step flushed x_pred)
+        if raw is None:
+            return _GENERAL
+        x = raw[0]
+        corr = self.scaled(x - x_pred)
+        if not corr <= CORRECTOR_RATIO * move + 1e-9:
+            return None
+        eq = solver._corrector_result(raw, p_t, r_t)
+        fn = self._point_fn()
+        pk = self.kernel
+        kf, ev = raw[4], raw[5]
+        if fn is None or not self._dense_point or kf[6].shape != (pk.n, pk.n):
+            p = self.point(eq, s)
+        else:
+            self._npts += 1
+            w = eq.wrench
+            pa = self._pargs
+            if pa is None:
+                mask = self.mask if self.mask is not None else pk._nomask
+                pa = self._pargs = (pk.kz, pk.task, pk.dt, mask, pk.nt, self.mask is not None, FAST_RANK, SINGULAR_RCOND)
+            jfree = np.ascontiguousarray(raw[3].jacobian.take(self.free, axis=1))
+            try:
+                st, k, xd, fd, mu, rate = fn(jfree, kf[6], pa[0], pa[1], pa[2], pa[3],
+                                             w if pa[5] else np.zeros(6), pa[4], pa[5], pa[6], pa[7])
+            except np.linalg.LinAlgError:
+                st = 1
+            if st:  # the point kernel declines: the generic path (Blocks kept by the corrector)
+                p = self.point(eq, s)
+            else:
+                lam = float(ev[-1]) if ev.size else -np.inf  # (ascending: _max_eig)
+                p = _BP(s, eq, self.d @ w, k, None, mu, lam)
+                if pa[5] and _analytic_rate:
+                    p.dmu = rate
+                x_dot = self._zero_x.copy()
+                x_dot[self.free] = xd
+                w_dot = self._zero_w.copy()
+                w_dot[self.task] = fd
+                p.tan = (x_dot, w_dot)
+        p.hist = (a.s, t[0], t[1])
         return p
 
     def reach(self, a: _BP, s: float) -> _BP | None:
@@ -868,7 +967,8 @@ def rigid_start_force(mu, scale: float) -> float | None:
 
 def _curve_point(p: _BP, thr: float) -> CurvePoint:
     held = bool(p.lam < -thr)
-    return CurvePoint(
+    return _frozen(  # CurvePoint(...) without its field-by-field frozen __init__ (one per point)
+        CurvePoint,
         deflection=float(p.s),
         force=float(p.force),
         wrench=np.asarray(p.eq.wrench, float).copy(),

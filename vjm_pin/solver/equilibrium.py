@@ -317,6 +317,15 @@ def _backtrack(alpha: float, e0: float, slope: float, en: float | None) -> float
     return min(max(-slope * alpha * alpha / (2.0 * c), 0.1 * alpha), 0.5 * alpha)
 
 
+def _chain_kernel_min_n() -> int:
+    """Free coordinates from which the compiled kernel hands an iteration to the O(n) chain algebra
+    (:data:`vjm_pin.solver.chain_kernel.ITERATE_MIN_N`; the direct call of :meth:`EquilibriumSolver._corrector`
+    is for shorter chains only)."""
+    from vjm_pin.solver import chain_kernel
+
+    return int(getattr(chain_kernel, "ITERATE_MIN_N", 0))
+
+
 def _all_finite(a: np.ndarray) -> bool:
     """``np.isfinite(a).all()`` for a float array, by its sum first (one call: a finite sum has
     no NaN or inf in it; a sum that overflowed is checked element by element)."""
@@ -733,6 +742,137 @@ class EquilibriumSolver:
             x = xn
             kkt_prev = kkt
         return None
+
+    def _corrector_context(self):
+        """The per-curve bundle of :meth:`_corrector` (None when the fused local iteration does not
+        apply: another method, a task of 0 or ≥ n rows, no screw-form Hessian, the fused kernel
+        switched off): ``VJM_PIN_JIT`` read once, the kernel's constants (:meth:`_kernel_consts`)
+        and a target slot of its own (``cf``), unpacked for the compiled kernel's direct call."""
+        m, n = len(self.task), len(self.free)
+        if (self.method != "newton" or m == 0 or m >= n or not _fused_enabled or self._smask is None
+                or not getattr(self.kin, "uses_screw", False)):
+            return None
+        consts, thr = self._kernel_consts()
+        cf = consts[1].copy()
+        consts = (consts[0], cf) + tuple(consts[2:])
+        # [mode, consts, cf, thr, the step function last used, its direct compiled call (kernel.lean) with
+        # the constants or None, that call's buffers (kernel.workspace)]
+        return [_kernel.mode(), consts, cf, thr, None, None, None]
+
+    def _corrector(self, ctx, p_t, r_t, x, flushed: bool = False):
+        """:meth:`_fast_newton_fused` from ``x`` (a predicted point of a curve) towards the target
+        ``(p_t, r_t)``, as one lean loop for :meth:`~vjm_pin.analysis.curve._Tracer.step`: the same
+        iterations, tests, caches (``_fast_fact``, ``_fast_cache``, the kept Blocks) and numbers, with
+        the per-solve set-up done once per curve (``ctx`` from :meth:`_corrector_context`: the
+        environment read, the constants, the compiled kernel called directly with them unpacked).
+
+        Returns None when the plain local iteration gives way (``_fast_its`` set, as
+        :meth:`_fast_newton`), else the raw equilibrium ``(x, f, iterations, state, fact, ev,
+        residuals, stability)`` (``fact`` = (J, Q or reflectors, R, F, r, ∇E, H(F), F (6,)) of the
+        kernel; build the result with :meth:`_corrector_result`). ``flushed``: ``x`` has no entry
+        below 1e-150 already (:func:`flush_tiny` would not change it)."""
+        chain, kernel = _chain, _kernel
+        kin, m, n = self.kin, len(self.task), len(self.free)
+        md, consts, cf, thr, step_fn, direct, _ = ctx
+        fn = kernel.get(md)
+        if fn is not step_fn:  # first call, or auto mode switched to the compiled kernel
+            small = getattr(fn, "dispatcher", None) is not None and int(consts[0][0]) < _chain_kernel_min_n()
+            lean = kernel.lean() if small else None
+            ctx[4], ctx[5] = step_fn, direct = fn, ((lean,) + consts[2:] if lean is not None else None)
+            ctx[6] = kernel.workspace(consts[0], kin.model.nq) if lean is not None else None
+        model, fid, data = kin.model, kin.frame_id, kin.data
+        cf[9:12] = p_t  # kernel.with_target
+        rot = self._ir.size > 0
+        flush = bool(chain._flush_enabled)
+        lwa = pin.LOCAL_WORLD_ALIGNED
+        zero3 = self._zero3
+        dummy = _KERNEL_DUMMY
+        ci = consts[0]
+        if direct is not None:
+            lean, kz, mask, theta0, vscale, escale = direct
+        cont_, polish_, conv_ = kernel.CONTINUE, kernel.POLISH, kernel.CONVERGED
+        self._fast_its = 0
+        kkt_prev = np.inf
+        polish = 0
+        x = np.array(x, dtype=float)
+        if not flushed:
+            fact = self._fast_fact
+            if fact is None or fact[0] != x.tobytes():
+                flush_tiny(x)
+        mo = None
+        for it in range(self._fast_max_iter + 1 + POLISH_ITERATIONS):
+            key = x.tobytes()
+            fact = self._fast_fact
+            if fact is not None and fact[0] == key and fact[1] is kin and fact[-1] is step_fn:
+                st = fact[2]
+                kf = fact[3:11]
+                j6, pos, rotm, refactor = dummy[8], st.position, st.rotation, False
+            else:
+                j6 = pin.computeFrameJacobian(model, data, x, fid, lwa)
+                if j6.ndim != 2 or not j6.flags.c_contiguous:
+                    j6 = np.ascontiguousarray(j6).reshape(6, model.nv)
+                mo = data.oMf[fid]
+                pos, rotm = mo.translation, (mo.rotation if rot else None)
+                st, kf, refactor = None, dummy[:8], True
+            erot = pin.log3(r_t @ rotm.T) if rot else zero3
+            if direct is not None:  # the compiled kernel, its arrays into the buffers (kernel.lean)
+                xout, ws = ctx[6]
+                status, kkt, ep, er, rs = lean(
+                    j6, pos, erot, x, refactor, polish < POLISH_ITERATIONS, flush, kf, ci, cf, kz, mask, theta0,
+                    vscale, escale, xout, ws
+                )
+                if status == cont_ or status == polish_:
+                    xn = xout.copy()
+                elif status == conv_:  # the buffers now belong to the caches: fresh ones
+                    kf, ev = ws[:8], ws[8]
+                    ctx[6] = kernel.workspace(ci, model.nq)
+            else:
+                status, kkt, ep, er, rs, kf, _, xn, ev = step_fn(
+                    j6, pos, erot, x, refactor, polish < POLISH_ITERATIONS, flush, False, kf, consts
+                )
+            if status == kernel.FACTOR_FAIL:
+                return None
+            if status == kernel.POLISH:
+                polish += 1
+                x = xn
+                kkt_prev = np.inf
+                continue
+            if status == kernel.RANK_FAIL:
+                return None
+            if status == kernel.CONVERGED:
+                stable = bool(ev.size == 0 or ev[-1] < -thr)  # (ascending)
+                if self.follow_stable and not stable:
+                    self._fast_its = it
+                    return None
+                stab = _built(StabilityResult, {"stable": stable, "eigenvalues": ev, "null_dim": n - m, "tolerance": thr})
+                jac, qf, rr, f, r, tau, hz, f6 = kf
+                if st is None:
+                    st = _built(KinematicState, {"position": pos.copy(), "rotation": mo.rotation.copy(), "jacobian": j6,
+                                                 "hessian": None})
+                    kin._last = (key, st)
+                res = {"position": float(ep), "orientation": float(er), "statics": float(rs)}
+                wkey = key + f6.tobytes()
+                self._fast_cache = (wkey + p_t.tobytes() + r_t.tobytes(), res, stab, x, f, f6, p_t, r_t)
+                self._fast_fact = (key, kin, st, jac, qf, rr, f, r, tau, hz, f6, step_fn)
+                remember_lazy(self.vm, kin, wkey, _blocks_builder(jac, hz, self.nt, self.vm.K_theta, st))
+                return x, f, it, st, kf, ev, res, stab
+            self._fast_its = it
+            if it and not kkt < 0.5 * kkt_prev or it - polish >= self._fast_max_iter:
+                return None
+            if status != kernel.CONTINUE:
+                return None
+            x = xn
+            kkt_prev = kkt
+        return None
+
+    def _corrector_result(self, raw, p_t, r_t, path: str = "newton+tangent-predictor") -> EquilibriumResult:
+        """The :class:`EquilibriumResult` of a converged :meth:`_corrector` (what :meth:`_result`
+        builds from the fused iteration's convergence)."""
+        x, _, it, st, kf, _, res, stab = raw
+        return self._pack(
+            x, kf[7].copy(), st, True, it, dict(res), path, stab, stab, tuple(self.task),
+            () if stab.stable else (UNSTABLE_HELD_NOTE,),
+        )
 
     def _fast_factor(self, x, f6, qfull, big):
         """The quantities of one :meth:`_fast_newton` iteration at ``x``: (state, J (task

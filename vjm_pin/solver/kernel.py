@@ -573,6 +573,63 @@ def _moved_loops(x, free, dx, flush):
     return xn
 
 
+_iterate_jit = None  # the compiled _iterate_loops, set by lean() before it compiles _iterate_into
+
+
+def _iterate_into(J6, pos, erot, x, refactor, polish_left, flush, fact, ci, cf, kz, mask, theta0, vscale, escale,
+                  xout, ws):
+    """:func:`_iterate_loops` (``keep`` False) with its arrays written into the caller's buffers
+    instead of returned (compiled by :func:`lean`): ``xout`` (nq,) the new iterate (status CONTINUE /
+    POLISH); ``ws`` = ``(jac, hh, rr, f, r, tau, hz, f6, ev)`` shaped as the compiled kernel's
+    factorisation and the eigenvalues of eq. (23) (status CONVERGED). Returns ``(status, kkt, ep,
+    er, rs)``: no array crosses back into Python (each returned array costs its boxing, ~1 µs)."""
+    status, kkt, ep, er, rs, kf, _dx, xn, ev = _iterate_jit(
+        J6, pos, erot, x, refactor, polish_left, flush, False, fact, ci, cf, kz, mask, theta0, vscale, escale
+    )
+    if status == CONTINUE or status == POLISH:
+        for i in range(xn.shape[0]):
+            xout[i] = xn[i]
+    elif status == CONVERGED:
+        ws[0][:, :] = kf[0]
+        ws[1][:, :] = kf[1]
+        ws[2][:, :] = kf[2]
+        ws[3][:] = kf[3]
+        ws[4][:] = kf[4]
+        ws[5][:] = kf[5]
+        ws[6][:, :] = kf[6]
+        ws[7][:] = kf[7]
+        ws[8][:] = ev
+    return status, kkt, ep, er, rs
+
+
+_lean = None  # the compiled _iterate_into once built, False when numba is unavailable
+
+
+def lean():
+    """The compiled :func:`_iterate_into` (for :meth:`~vjm_pin.solver.equilibrium.EquilibriumSolver._corrector`),
+    or None when numba cannot be imported."""
+    global _lean
+    if _lean is None:
+        it = _load_compiled()
+        disp = getattr(it, "dispatcher", None) if it else None
+        if disp is None:
+            _lean = False
+        else:
+            import numba
+
+            globals()["_iterate_jit"] = disp
+            _lean = numba.njit(cache=True, nogil=True)(_iterate_into)
+    return _lean or None
+
+
+def workspace(ci, nq: int) -> tuple:
+    """Fresh buffers ``(xout, ws)`` of :func:`_iterate_into` for the constants ``ci`` (:func:`pack`)."""
+    n, m = int(ci[0]), int(ci[2])
+    ws = (np.empty((m, n)), np.empty((m + 1, n)), np.empty((m, m)), np.empty(m), np.empty(n), np.empty(n),
+          np.empty((n, n)), np.empty(6), np.empty(n - m))
+    return np.empty(nq), ws
+
+
 def _load_compiled():
     """The compiled iteration (numba, cached on disk), or False when numba cannot be imported."""
     global _compiled, _built
@@ -590,8 +647,16 @@ def _load_compiled():
         for name in ("_reflect_rows", "_apply_qt", "_step_loops", "_moved_loops"):
             g[name] = numba.njit(**opts)(g[name])
         fn = numba.njit(**opts)(_iterate_loops)
+        # long chains: O(n) algebra (chain_kernel), this kernel where it is unsure
+        from vjm_pin.solver import chain_kernel
+
+        def iterate_dense(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, consts):
+            return fn(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, *consts)
 
         def iterate_compiled(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, consts):
+            if consts[0][0] >= chain_kernel.ITERATE_MIN_N:
+                return chain_kernel.iterate(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, consts,
+                                            iterate_dense)
             return fn(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, *consts)
 
         iterate_compiled.dispatcher = fn
@@ -630,11 +695,14 @@ def load() -> bool:
     return bool(_load_compiled())
 
 
-def get():
+def get(md: str | None = None):
     """The iteration function to use now: :func:`iterate_numpy` when ``VJM_PIN_JIT=0`` or numba is
     not importable; the compiled kernel when ``VJM_PIN_JIT=1``, or in ``auto`` mode when it is
-    already loaded (:func:`load`) or :data:`JIT_AFTER_ITERATIONS` numpy iterations have run."""
-    md = mode()
+    already loaded (:func:`load`) or :data:`JIT_AFTER_ITERATIONS` numpy iterations have run.
+    ``md``: :func:`mode` as read by the caller earlier (a curve reads the environment once), else
+    read now."""
+    if md is None:
+        md = mode()
     if md == "0":
         return iterate_numpy
     if md == "1" or _compiled or (_compiled is None and _numpy_iterations >= JIT_AFTER_ITERATIONS):
