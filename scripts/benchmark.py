@@ -1550,8 +1550,9 @@ def format_orthoglide_table(o: dict | None) -> list[str]:
     return [line]
 
 
-def run_issue14(quick: bool = False, repeats: int = 5) -> dict:
-    """Every target of issue 14 this script can measure, as ratios measured side by side."""
+def run_issue14(quick: bool = False, repeats: int = 5, orthoglide: bool = True) -> dict:
+    """Every target of issue 14 this script can measure, as ratios measured side by side
+    (``orthoglide`` False: without the Orthoglide table, minutes of its own)."""
     reps = 2 if quick else repeats
     vm_c = paper_model(1)
     out = {
@@ -1574,7 +1575,7 @@ def run_issue14(quick: bool = False, repeats: int = 5) -> dict:
     out["map"] = bench_map_rate(40 if quick else 20000, 1 if quick else 2, backends=("serial",) if quick else ("serial", "local", "dask"))
     out["opensees_k8"] = bench_opensees_same_accuracy(8, repeats=1 if quick else max(3, reps))
     out["chain_algebra"] = bench_chain_algebra((1, 2, 4, 8) if quick else (1, 2, 4, 8, 16, 32, 64), repeats=2 if quick else reps)
-    out["orthoglide_table"] = bench_orthoglide_table(quick)
+    out["orthoglide_table"] = bench_orthoglide_table(quick) if orthoglide else {"skipped": "not asked for (--no-orthoglide-table)"}
     return out
 
 
@@ -1834,10 +1835,11 @@ def main(argv=None) -> int:
     ap.add_argument("--opensees-k", type=int, default=8, help="elements (and VJM subdivisions) per link for the peer")
     ap.add_argument("--quick-wins-only", action="store_true", help="only the before/after table of issue 14's quick wins")
     ap.add_argument("--issue14-only", action="store_true", help="only the issue 14 targets (release solver vs now, side by side)")
+    ap.add_argument("--no-orthoglide-table", action="store_true", help="issue 14 targets without the Orthoglide table (minutes)")
     args = ap.parse_args(argv)
     if args.issue14_only:
         machine = machine_info()
-        q = run_issue14(args.quick, repeats=args.repeats)
+        q = run_issue14(args.quick, repeats=args.repeats, orthoglide=not args.no_orthoglide_table)
         print(format_issue14(q, machine))
         Path(args.json).write_text(json.dumps({"machine": machine, "issue14": q}, indent=1, default=_json_default))
         print(f"\nJSON: {args.json}")

@@ -111,6 +111,7 @@ from vjm_pin.solver.stability import (
     RANK_TOL,
     SCIPY_LAPACK_MAX_N,
     STABILITY_TOL,
+    DeferredStability,
     StabilityResult,
     check_stability,
     check_stability_held,
@@ -720,12 +721,12 @@ class EquilibriumSolver:
                 if self.follow_stable and not stable:
                     self._fast_its = it
                     return None
-                stab = _built(StabilityResult, {"stable": stable, "eigenvalues": ev, "null_dim": n - m, "tolerance": thr})
                 jac, qf, rr, f, r, tau, hz, f6 = kf
                 if st is None:
                     st = _built(KinematicState, {"position": pos.copy(), "rotation": mo.rotation.copy(), "jacobian": j6,
                                                  "hessian": None})
                     kin._last = (key, st)  # kin.evaluate(x, hessian=False) at this point: no Pinocchio call
+                stab = self._kernel_stability(stable, ev, n - m, thr, jac, hz, st)
                 res = {"position": float(ep), "orientation": float(er), "statics": float(rs)}
                 wkey = key + f6.tobytes()
                 self._fast_cache = (wkey + pt.tobytes() + rt.tobytes(), res, stab, x, f, f6, p_t, r_t)
@@ -742,6 +743,15 @@ class EquilibriumSolver:
             x = xn
             kkt_prev = kkt
         return None
+
+    def _kernel_stability(self, stable, ev, d, thr, jac, hz, st) -> StabilityResult:
+        """The eq. (23) verdict of a fused-kernel convergence: all ``d`` eigenvalues from the dense
+        kernel; from the O(n) chain kernel (:mod:`vjm_pin.solver.chain_kernel`) only the largest,
+        and the rest computed from the equilibrium's Blocks when first read
+        (:class:`~vjm_pin.solver.stability.DeferredStability`)."""
+        if ev.size == d:
+            return _built(StabilityResult, {"stable": stable, "eigenvalues": ev, "null_dim": d, "tolerance": thr})
+        return DeferredStability(stable, float(ev[-1]), d, thr, _blocks_builder(jac, hz, self.nt, self.vm.K_theta, st))
 
     def _corrector_context(self):
         """The per-curve bundle of :meth:`_corrector` (None when the fused local iteration does not
@@ -844,12 +854,12 @@ class EquilibriumSolver:
                 if self.follow_stable and not stable:
                     self._fast_its = it
                     return None
-                stab = _built(StabilityResult, {"stable": stable, "eigenvalues": ev, "null_dim": n - m, "tolerance": thr})
                 jac, qf, rr, f, r, tau, hz, f6 = kf
                 if st is None:
                     st = _built(KinematicState, {"position": pos.copy(), "rotation": mo.rotation.copy(), "jacobian": j6,
                                                  "hessian": None})
                     kin._last = (key, st)
+                stab = self._kernel_stability(stable, ev, n - m, thr, jac, hz, st)
                 res = {"position": float(ep), "orientation": float(er), "statics": float(rs)}
                 wkey = key + f6.tobytes()
                 self._fast_cache = (wkey + p_t.tobytes() + r_t.tobytes(), res, stab, x, f, f6, p_t, r_t)

@@ -47,6 +47,44 @@ class StabilityResult:
         return float(-self.eigenvalues.max()) if self.eigenvalues.size else float("inf")
 
 
+class DeferredStability(StabilityResult):
+    """A :class:`StabilityResult` whose verdict and largest eigenvalue are known now and whose
+    whole spectrum is computed when first read.
+
+    The O(n) chain kernel (:mod:`vjm_pin.solver.chain_kernel`) certifies the verdict of eq. (23)
+    from the largest eigenvalue alone (a Sturm count and inverse iteration); a curve needs no
+    more. ``eigenvalues`` keeps its meaning (all ``d`` eigenvalues, ascending): they come from
+    :func:`check_stability` on the equilibrium's blocks (dense, O(n³)) the first time they are
+    read, e.g. by ``vjm-pin analyze --json``. ``margin`` uses the largest eigenvalue known now.
+    Pickled (a map's worker, Dask) as a plain :class:`StabilityResult`, spectrum included.
+    """
+
+    def __init__(self, stable: bool, largest: float, null_dim: int, tolerance: float, blocks):
+        object.__setattr__(self, "stable", bool(stable))
+        object.__setattr__(self, "null_dim", int(null_dim))
+        object.__setattr__(self, "tolerance", float(tolerance))
+        object.__setattr__(self, "_largest", float(largest))
+        object.__setattr__(self, "_blocks", blocks)  # () -> Blocks at the equilibrium
+        object.__setattr__(self, "_spectrum", None)
+
+    @property
+    def eigenvalues(self) -> np.ndarray:
+        ev = self._spectrum
+        if ev is None:
+            ev = check_stability(self._blocks()).eigenvalues
+            ev.setflags(write=False)
+            object.__setattr__(self, "_spectrum", ev)
+            object.__setattr__(self, "_blocks", None)
+        return ev
+
+    @property
+    def margin(self) -> float:
+        return -self._largest
+
+    def __reduce__(self):
+        return (StabilityResult, (self.stable, np.array(self.eigenvalues), self.null_dim, self.tolerance))
+
+
 def null_space(J_theta: np.ndarray, J_q: np.ndarray, rank_tol: float = RANK_TOL) -> np.ndarray:
     """Orthonormal basis (nθ+nq, d) of the null space of ``[J_θ J_q]`` by SVD (eq. 20–21).
 
