@@ -28,7 +28,11 @@ LAPACK, the fallback, exactly the arithmetic of the solver's unfused path) and t
 Householder reflectors are applied where it would multiply, so ``ZᵀWZ`` costs ``4mn²`` flops
 instead of ``2n²(n − m)``; own Cholesky and LU; LAPACK ``dsyevd``/``dgesdd`` through numba's
 ``np.linalg`` for the eigenvalues and singular values of the verdict). They agree to rounding
-(``tests/test_kernel.py``; a step differs by ~1e-15·cond(ZᵀWZ) relative).
+(``tests/test_kernel.py``; a step differs by ~1e-15·cond(ZᵀWZ) relative). From
+``chain_kernel.ITERATE_MIN_N`` free coordinates the compiled entry point hands the iteration to
+:mod:`vjm_pin.solver.chain_kernel` (O(n) block elimination; at CONVERGED ``ev`` is then the largest
+eigenvalue of eq. (23) alone, and the solver reports the rest lazily:
+:class:`~vjm_pin.solver.stability.DeferredStability`).
 
 Why numba (and not C++ through Pinocchio's CasADi/CppAD code generation or a C extension):
 it needs no compiler at install time (the wheel has LLVM inside), the fallback is the same
