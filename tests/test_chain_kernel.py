@@ -316,6 +316,97 @@ def test_long_random_chain_with_orientation_rows(dense):
     assert got[4] == pytest.approx(ref[4], rel=1e-7, abs=1e-12 * kscale)
 
 
+# --------------------------------------------------------------------------- the layout cache
+def _variant(beam=None, sprung_base_y=False):
+    """Model C (S, k = 2) rebuilt from its spec: another beam, or ``base_y`` made a 1-D spring
+    (the same number of free coordinates, another split into springs and passive joints)."""
+    from vjm_pin.model.generator import generate_vjm
+    from vjm_pin.model.paper_models import paper_spec, rigid_chain_urdf
+
+    spec = paper_spec("c", "s", beam=beam or PAPER_BEAM, subdivide=2)
+    if sprung_base_y:
+        spec["passive"] = ["base_z"]
+        spec["actuators"] = {"base_y": 50.0}
+    return load_vjm(generate_vjm(rigid_chain_urdf(1.0), spec))
+
+
+def _solver_layout(s):
+    consts, _ = s._kernel_consts()
+    ci, kz, mask = consts[0], consts[2], consts[3]
+    n, nt = int(ci[0]), int(ci[1])
+    return chain_kernel._layout(ci, kz, ci[6:6 + n], nt, mask), consts
+
+
+def _same_layout(a, b):
+    return (a.ok == b.ok and a.kscale == b.kscale
+            and all(np.array_equal(getattr(a, f), getattr(b, f)) for f in ("cols", "order", "starts", "dpos", "kd",
+                                                                             "kp", "klo", "khi")))
+
+
+def test_layouts_are_shared_by_content_and_only_between_equal_models(dense, monkeypatch):
+    monkeypatch.setattr(chain_kernel, "_SHARED", {})
+    monkeypatch.setattr(chain_kernel, "_LAYOUTS", {})
+    stiff = dict(PAPER_BEAM, E=1.7 * PAPER_BEAM["E"])
+    vms = {"base": _variant(), "again": _variant(), "stiffer": _variant(beam=stiff),
+           "sprung": _variant(sprung_base_y=True)}
+    solvers = {k: EquilibriumSolver(v) for k, v in vms.items()}
+    n = {k: len(s.free) for k, s in solvers.items()}
+    assert len(set(n.values())) == 1, n  # the same n: only the content tells them apart
+    assert solvers["sprung"].nt == solvers["base"].nt + 1
+    assert not np.array_equal(vms["stiffer"].K_theta, vms["base"].K_theta)
+    lays = {k: _solver_layout(s)[0] for k, s in solvers.items()}
+    # the same model rebuilt (other arrays, equal bytes) gets the cached layout; the point kernel
+    # of a curve on it (its own zero-padded K, the support mask of the tracer) too
+    assert lays["again"] is lays["base"]
+    pk = pkmod.PointKernel(vms["again"].K_theta, solvers["again"].free, DIRECTION[:3], vms["again"].task)
+    s = solvers["again"]
+    assert chain_kernel._layout(pk.kz, pk.kz, pk.free, pk.nt, s.kin.support_mask(s.free)) is lays["base"]
+    # different models never: each gets its own, equal to one built from scratch
+    for k in ("stiffer", "sprung"):
+        assert lays[k] is not lays["base"]
+        c = _solver_layout(solvers[k])[1]
+        fresh = chain_kernel._Layout(c[2], c[0][6:6 + n[k]], int(c[0][1]), c[3])
+        assert _same_layout(lays[k], fresh) and lays[k].ok
+        assert not np.array_equal(lays[k].kd, lays["base"].kd) or not np.array_equal(lays[k].cols, lays["base"].cols)
+    # and the chain iteration with them agrees with the dense kernel on each model
+    rng = np.random.default_rng(7)
+    for k in ("base", "stiffer", "sprung", "again"):
+        s = solvers[k]
+        eq = s.solve(2e-5 * DIRECTION)
+        assert eq.converged
+        p_eq = s.kin.evaluate(eq.x, hessian=False).position
+        x = eq.x.copy()
+        x[s.free] += 1e-5 * rng.standard_normal(len(s.free))
+        for xx in (eq.x, x):
+            head, consts, thr = kernel_args(s, xx, p_eq)
+            a = head + (True, False, True, True, _KERNEL_DUMMY[:8], consts)
+            d = dense(*a)
+            c = chain_kernel.iterate(*a, dense=lambda *z: pytest.fail("dense fallback at a regular point"))
+            assert c[0] == d[0], k
+            if d[0] in (kernel.CONTINUE, kernel.POLISH):
+                assert rel(c[6], d[6]) <= max(1e-10, 1e-15 * reduced_cond(s, d[5])), k
+            else:
+                assert d[0] == kernel.CONVERGED
+                top = d[8].max()
+                assert abs(c[8][0] - top) <= 1e-10 * abs(top) + 1e-14 * lays[k].kscale, k
+                assert (c[8][0] < -thr) == (top < -thr)
+
+
+def test_layout_cache_is_bounded(dense, monkeypatch):
+    monkeypatch.setattr(chain_kernel, "_SHARED", {})
+    monkeypatch.setattr(chain_kernel, "_LAYOUTS", {})
+    monkeypatch.setattr(chain_kernel, "SHARED_MAX", 2)
+    vms = [_variant(beam=dict(PAPER_BEAM, E=f * PAPER_BEAM["E"])) for f in (1.0, 1.3, 1.6)]
+    lays = [_solver_layout(EquilibriumSolver(v))[0] for v in vms]
+    assert len(chain_kernel._SHARED) == 2
+    again = _solver_layout(EquilibriumSolver(vms[0]))[0]  # evicted (least recently used): rebuilt
+    assert again is not lays[0] and _same_layout(again, lays[0])
+    assert _solver_layout(EquilibriumSolver(vms[2]))[0] is lays[2]
+    monkeypatch.setattr(chain_kernel, "SHARED_MAX_BYTES", 1)  # the newest entry is always kept
+    assert _solver_layout(EquilibriumSolver(vms[1]))[0] is not lays[1]
+    assert len(chain_kernel._SHARED) == 1
+
+
 # --------------------------------------------------------------------------- pieces
 def test_pivot_block_inertia_matches_eigenvalues(dense):
     """Sylvester's counts of a symmetric pivot block (Bunch–Parlett elimination) against its

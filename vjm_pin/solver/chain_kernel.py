@@ -53,6 +53,7 @@ n = 56 every call is faster).
 from __future__ import annotations
 
 import math
+import threading
 
 import numpy as np
 
@@ -1250,22 +1251,55 @@ class _Layout:
             self.ok = bool(np.array_equal(mc, np.tril(np.ones((n, n), bool))))
 
 
-_LAYOUTS: dict = {}
+_LAYOUTS: dict = {}  # id(key object) -> (key object, kz, mask, layout): the per-solver fast path
+_SHARED: dict = {}  # content key (_content_key) -> layout, least recently used first
+_LOCK = threading.Lock()
+#: Bounds of the content-keyed layout cache: entries, and the bytes of their keys (the newest
+#: entry is always kept).
+SHARED_MAX = 8
+SHARED_MAX_BYTES = 1 << 26
+
+
+def _content_key(kz, free, nt, mask) -> tuple:
+    """Everything a :class:`_Layout` is computed from, as bytes: ``K_θ = kz[:nt, :nt]``, the
+    free coordinates and the support mask (their shapes and element types fixed by the
+    conversions), so equal models share a layout and models that differ in any entry do not."""
+    kt = np.ascontiguousarray(kz[:nt, :nt], float)
+    fr = np.ascontiguousarray(free, np.int64)
+    mk = b"" if mask is None else np.ascontiguousarray(mask, np.bool_).tobytes()
+    shape = (int(nt), fr.shape[0], kt.shape, None if mask is None else np.shape(mask))
+    return shape, kt.tobytes(), fr.tobytes(), mk
 
 
 def _layout(key_obj, kz, free, nt, mask) -> _Layout:
+    """The :class:`_Layout` of ``(kz, free, nt, mask)``: by the identity of ``key_obj`` (an
+    array owned by one solver or point kernel, with the same ``kz`` and ``mask`` objects), else
+    by content (:func:`_content_key`): a fresh solver of a model seen before reuses its layout
+    (building one costs ~10 ms at n = 144, the pseudo-inverses of the ``K_θ`` blocks)."""
     hit = _LAYOUTS.get(id(key_obj))
-    if hit is not None and hit[0] is key_obj:
-        return hit[1]
-    lay = _Layout(kz, free, nt, mask)
-    if len(_LAYOUTS) >= 32:
-        _LAYOUTS.pop(next(iter(_LAYOUTS)))
-    _LAYOUTS[id(key_obj)] = (key_obj, lay)
+    if hit is not None and hit[0] is key_obj and hit[1] is kz and hit[2] is mask:
+        return hit[3]
+    key = _content_key(kz, free, nt, mask)
+    with _LOCK:
+        lay = _SHARED.get(key)
+    if lay is None:
+        lay = _Layout(kz, free, nt, mask)  # outside the lock: ~10 ms at n = 144
+    with _LOCK:  # threads (a map's workers) share the caches
+        lay = _SHARED.pop(key, lay)  # another thread's equal layout, if it was first
+        _SHARED[key] = lay  # (re)inserted last: the most recently used
+        size = sum(len(k[1]) + len(k[2]) + len(k[3]) for k in _SHARED)
+        while len(_SHARED) > 1 and (len(_SHARED) > SHARED_MAX or size > SHARED_MAX_BYTES):
+            k = next(iter(_SHARED))
+            size -= len(k[1]) + len(k[2]) + len(k[3])
+            del _SHARED[k]
+        if len(_LAYOUTS) >= 32:
+            _LAYOUTS.pop(next(iter(_LAYOUTS)))
+        _LAYOUTS[id(key_obj)] = (key_obj, kz, mask, lay)
     return lay
 
 
 # =========================================================================== entry points
-_PROWS: dict = {}  # id(point kernel) -> (point kernel, (m − 1, m) rows spanning the complement of d_t)
+_PROWS: dict = {}  # d_t (bytes, length) -> (m − 1, m) rows spanning its complement
 _GUESS: dict = {}  # id(key object) -> (key object, previous eigenvector in chain order)
 
 
@@ -1277,9 +1311,10 @@ def _guess(key_obj, n):
 
 
 def _remember(key_obj, vec):
-    if len(_GUESS) >= 64:
-        _GUESS.pop(next(iter(_GUESS)))
-    _GUESS[id(key_obj)] = (key_obj, vec)
+    with _LOCK:
+        if len(_GUESS) >= 64:
+            _GUESS.pop(next(iter(_GUESS)))
+        _GUESS[id(key_obj)] = (key_obj, vec)
 
 
 def iterate(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, consts, dense):
@@ -1315,14 +1350,17 @@ def point(pk, b, mask, wrench, fast_rank):
     lay = _layout(pk.kz, pk.kz, pk.free, pk.nt, mask)
     if not lay.ok:
         return None
-    hit = _PROWS.get(id(pk))
-    if hit is None or hit[0] is not pk:
-        dt = pk.dt.reshape(-1, 1) / np.linalg.norm(pk.dt)  # rows spanning the complement of d_t
-        hit = (pk, np.ascontiguousarray(np.linalg.svd(dt, full_matrices=True)[0][:, 1:].T))
-        if len(_PROWS) >= 32:
-            _PROWS.pop(next(iter(_PROWS)))
-        _PROWS[id(pk)] = hit
-    prow = hit[1]
+    dt = np.ascontiguousarray(pk.dt, float)
+    pkey = (dt.shape, dt.tobytes())
+    prow = _PROWS.get(pkey)
+    if prow is None:
+        # rows spanning the complement of d_t (a function of d_t only: shared by equal directions)
+        u = np.linalg.svd(dt.reshape(-1, 1) / np.linalg.norm(dt), full_matrices=True)[0]
+        prow = np.ascontiguousarray(u[:, 1:].T)
+        with _LOCK:
+            if len(_PROWS) >= 32:
+                _PROWS.pop(next(iter(_PROWS)))
+            _PROWS[pkey] = prow
     rate_wanted = mask is not None
     has, gvec = _guess(pk, lay.cols.shape[0])
     st, k, xd, fd, mu, rate, vec = fns[1](
