@@ -42,3 +42,18 @@ def _validate_json_outputs(monkeypatch):
 
     monkeypatch.setattr(common, "dump_json", checked)
     yield
+
+
+@pytest.fixture
+def two_blas_threads():
+    """Every BLAS pool (numpy's and scipy's OpenBLAS, both loaded as in the solver) limited to 2
+    threads for the test (precondition checked), restored after it."""
+    import scipy.linalg  # noqa: F401  (both OpenBLAS pools loaded)
+    from threadpoolctl import threadpool_limits
+
+    from tests.blas_pools import blas_threads
+
+    with threadpool_limits(limits=2, user_api="blas"):
+        outer = blas_threads()
+        assert outer and all(n == 2 for n in outer), f"precondition: BLAS pools at 2 threads, got {outer}"
+        yield

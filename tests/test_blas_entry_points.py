@@ -6,26 +6,9 @@ single-process solve: the second OpenBLAS thread worked outside the limit."""
 from __future__ import annotations
 
 import numpy as np
-import pytest
-from threadpoolctl import threadpool_info, threadpool_limits
 
+from tests.blas_pools import blas_threads
 from vjm_pin.model.registry import resolve_model
-
-
-def _blas_threads():
-    return [d["num_threads"] for d in threadpool_info() if d["user_api"] == "blas"]
-
-
-@pytest.fixture
-def two_blas_threads():
-    import scipy.linalg  # noqa: F401  (both OpenBLAS pools loaded, as in the solver)
-
-    with threadpool_limits(limits=2, user_api="blas"):
-        outer = _blas_threads()
-        assert outer and all(n == 2 for n in outer), (
-            f"precondition: BLAS pools at 2 threads, got {outer}"
-        )
-        yield
 
 
 def test_solver_setup_runs_under_one_blas_thread(two_blas_threads, monkeypatch):
@@ -35,13 +18,13 @@ def test_solver_setup_runs_under_one_blas_thread(two_blas_threads, monkeypatch):
     inv = np.linalg.inv
 
     def recording_inv(a):
-        seen.append(_blas_threads())
+        seen.append(blas_threads())
         return inv(a)
 
     monkeypatch.setattr(np.linalg, "inv", recording_inv)
     EquilibriumSolver(resolve_model("paper-c-s"))
     assert seen and all(n == 1 for s in seen for n in s), seen
-    assert all(n == 2 for n in _blas_threads())  # restored
+    assert all(n == 2 for n in blas_threads())  # restored
 
 
 def test_unloaded_stiffness_runs_under_one_blas_thread(two_blas_threads, monkeypatch):
@@ -52,14 +35,14 @@ def test_unloaded_stiffness_runs_under_one_blas_thread(two_blas_threads, monkeyp
     real = smod.stiffness_from_blocks
 
     def recording(*args, **kwargs):
-        seen.append(_blas_threads())
+        seen.append(blas_threads())
         return real(*args, **kwargs)
 
     monkeypatch.setattr(smod, "stiffness_from_blocks", recording)
     vm = resolve_model("paper-c-s")
     k = unloaded_stiffness(vm).stiffness
     assert seen and all(n == 1 for s in seen for n in s), seen
-    assert all(n == 2 for n in _blas_threads())
+    assert all(n == 2 for n in blas_threads())
     # the same numbers as without the limit (the limit changes threads, not arithmetic)
     np.testing.assert_allclose(k, real(_blocks(vm), vm.task, "eq30").stiffness, rtol=1e-12, atol=0)
 

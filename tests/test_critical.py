@@ -263,45 +263,18 @@ def test_cli_json_and_text(capsys):
     assert value == pytest.approx(1e3 * r.force, rel=1e-7)
 
 
+#: ``critical four-bar --direction -1 0 0 --load``: the words of a ``--load`` follow.
+FOUR_BAR_LOAD = ["critical", "four-bar", "--direction", "-1", "0", "0", "--load"]
+
+
 @pytest.mark.parametrize(
     "argv, status, needle",
     [
         (["critical", "paper-c-s", "--direction", "0", "0", "0"], 2, "must not be zero"),
         (["critical", "paper-c-s", "--direction", "-1", "0", "0", "--rtol", "1"], 2, "--rtol"),
         (["critical", "no-such-model", "--direction", "-1", "0", "0"], 2, "unknown model"),
-        (
-            [
-                "critical",
-                "four-bar",
-                "--direction",
-                "-1",
-                "0",
-                "0",
-                "--load",
-                "nowhere",
-                "0",
-                "0",
-                "1",
-            ],
-            2,
-            "nowhere",
-        ),
-        (
-            [
-                "critical",
-                "four-bar",
-                "--direction",
-                "-1",
-                "0",
-                "0",
-                "--load",
-                "coupler_link",
-                "0",
-                "1",
-            ],
-            2,
-            "got 2 numbers",
-        ),
+        (FOUR_BAR_LOAD + ["nowhere", "0", "0", "1"], 2, "nowhere"),
+        (FOUR_BAR_LOAD + ["coupler_link", "0", "1"], 2, "got 2 numbers"),
         (
             ["critical", "ur5", "--direction", "0", "0", "0", "0", "1", "0", "--free"],
             2,

@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from threadpoolctl import threadpool_info, threadpool_limits
 
 import vjm_pin.kinematics.chain as kmod
+from tests.blas_pools import blas_threads
 from vjm_pin.analysis.curve import trace_curve
 from vjm_pin.exceptions import InputError
 from vjm_pin.kinematics.chain import FLUSH_BELOW, flush_tiny
@@ -68,24 +68,12 @@ def test_curve_with_and_without_flush_agree(k, monkeypatch):
     np.testing.assert_allclose(sf, sr, rtol=1e-9, atol=1e-12 * np.nanmax(np.abs(sr)))
 
 
-def _blas_threads():
-    return [d["num_threads"] for d in threadpool_info() if d["user_api"] == "blas"]
-
-
-@pytest.fixture
-def two_blas_threads():
-    with threadpool_limits(limits=2, user_api="blas"):
-        outer = _blas_threads()
-        assert outer and all(n == 2 for n in outer), f"precondition: BLAS pools at 2 threads, got {outer}"
-        yield
-
-
 def _spy_kinematics(solver, seen):
     """Record the BLAS thread counts every time the solver evaluates its kinematics."""
     inner = solver.kin.evaluate
 
     def evaluate(x, hessian=True):
-        seen.append(_blas_threads())
+        seen.append(blas_threads())
         return inner(x, hessian)
 
     solver.kin.evaluate = evaluate
@@ -99,33 +87,33 @@ def test_one_blas_thread_inside_solve_and_restored_after(two_blas_threads):
     res = solver.solve(1e-5 * COMPRESSION)
     assert res.converged and seen
     assert all(n == 1 for counts in seen for n in counts)
-    assert all(n == 2 for n in _blas_threads())
+    assert all(n == 2 for n in blas_threads())
     # nested public calls (solve_wrench -> solve_mixed): still one thread, restored at the end
     seen.clear()
     solver.solve_wrench(0.5 * res.wrench)
     assert seen and all(n == 1 for counts in seen for n in counts)
-    assert all(n == 2 for n in _blas_threads())
+    assert all(n == 2 for n in blas_threads())
     loaded_stiffness(vm, res, kin=solver.kin)
-    assert all(n == 2 for n in _blas_threads())
+    assert all(n == 2 for n in blas_threads())
     # restored after an error too
     with pytest.raises(InputError):
         solver.solve([1.0, 2.0])
-    assert all(n == 2 for n in _blas_threads())
+    assert all(n == 2 for n in blas_threads())
 
 
 def test_one_blas_thread_inside_trace_curve(two_blas_threads):
     vm = resolve_model("paper-c-s")
     seen = []
-    trace_curve(vm, COMPRESSION, _max_deflection(), steps=4, progress=lambda i, n: seen.append(_blas_threads()))
+    trace_curve(vm, COMPRESSION, _max_deflection(), steps=4, progress=lambda i, n: seen.append(blas_threads()))
     assert len(seen) == 5 and all(n == 1 for counts in seen for n in counts)
-    assert all(n == 2 for n in _blas_threads())
+    assert all(n == 2 for n in blas_threads())
 
 
 def test_blas_policy_switch_off_leaves_pools_alone(two_blas_threads, monkeypatch):
     monkeypatch.setattr(tmod, "_enabled", False)
     vm = resolve_model("paper-c-s")
     seen = []
-    trace_curve(vm, COMPRESSION, _max_deflection(), steps=2, progress=lambda i, n: seen.append(_blas_threads()))
+    trace_curve(vm, COMPRESSION, _max_deflection(), steps=2, progress=lambda i, n: seen.append(blas_threads()))
     assert seen and all(n == 2 for counts in seen for n in counts)
 
 
@@ -140,14 +128,14 @@ def test_map_pose_one_blas_thread_and_shared_kinematics(two_blas_threads, monkey
     inner = maps._evaluate_pose
 
     def spy(*a):
-        seen.append(_blas_threads())
+        seen.append(blas_threads())
         return inner(*a)
 
     monkeypatch.setattr(maps, "_evaluate_pose", spy)
     maps._KIN_CACHE.clear()
     shared = [maps.evaluate_pose(vm, names, p, w) for p in poses]
     assert len(seen) == 3 and all(n == 1 for counts in seen for n in counts)
-    assert all(n == 2 for n in _blas_threads())
+    assert all(n == 2 for n in blas_threads())
     assert len({id(k) for k in maps._KIN_CACHE.values()}) == 1  # one pin.Data for all poses
     # a fresh Kinematics per pose (the old way) gives the same numbers bit for bit
     for p, row in zip(poses, shared):

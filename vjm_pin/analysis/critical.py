@@ -81,6 +81,8 @@ from vjm_pin.analysis.curve import (
     _direction,
     _hermite_extremum,
     _max_eig,
+    _mechanism_solver,
+    _reference_equilibrium,
     _Tracer,
     _unloaded,
 )
@@ -94,7 +96,6 @@ from vjm_pin.solver.lapack import lapack as _lapack
 from vjm_pin.solver.lapack import solve_triangular
 from vjm_pin.solver.mechanism import MechanismSolver, _null_basis
 from vjm_pin.solver.stability import (
-    check_stability,
     check_stability_held,
     null_space,
     spectral_norm,
@@ -351,19 +352,7 @@ def _critical_mechanism(vm, d, solver, max_deflection, rtol, max_iter, loads, gr
     anywhere, gravity, ``free``."""
     if free:
         check_free_direction(d)
-    if solver is None:
-        solver = MechanismSolver(vm, loads=loads, gravity=gravity)
-    elif not isinstance(solver, MechanismSolver):
-        raise InputError(
-            "this model needs the mechanism solver (loop closures, dead loads or a free task "
-            "frame): pass a MechanismSolver as solver, or none"
-        )
-    elif loads or gravity is not None:
-        raise InputError(
-            "give the dead loads and gravity to the MechanismSolver passed as solver, not twice"
-        )
-    if solver.vm is not vm:
-        raise InputError("the solver was built for another model")
+    solver = _mechanism_solver(vm, solver, loads, gravity, "model")
     rotation = bool(np.any(d[3:]))
     r0 = max_deflection or (1.0 if rotation else solver.length_scale)
     tr = MechanismTracer(vm, d, r0, solver, 1e3 * rtol, free)
@@ -595,25 +584,8 @@ def _start(vm, tr: _Tracer, solver: EquilibriumSolver, d: np.ndarray):
     Where the reference is a stable unloaded equilibrium (no spring preload; eq. 23 negative
     definite) ``solver.solve(0)`` returns it after 0 iterations, so it is taken directly (the
     rigidity test of ``_unloaded`` is then ``k = dᵀK_C d`` infinite at that point)."""
-    x = np.asarray(vm.reference, float).copy()
-    stat = vm.K_theta @ (x[vm.theta_idx] - vm.theta0)
-    if not (stat.size and np.abs(stat).max() > 0):
-        b = tr.blocks(x, np.zeros(6))
-        probe = EquilibriumResult(
-            x=x,
-            q=x[vm.q_idx].copy(),
-            theta=x[vm.theta_idx].copy(),
-            wrench=np.zeros(6),
-            deflection=np.zeros(6),
-            position=solver.p0.copy(),
-            rotation=solver.r0.copy(),
-            converged=True,
-            iterations=0,
-            residuals={"position": 0.0, "orientation": 0.0, "statics": 0.0},
-            energy=0.0,
-            path="reference",
-            stability=check_stability(b),
-        )
+    probe = _reference_equilibrium(vm, solver, tr.kin)
+    if probe is not None:
         p0 = tr.point(probe, 0.0)
         if np.isinf(p0.k) or (np.isfinite(p0.k) and p0.lam < -tr.thr):
             return p0

@@ -287,8 +287,9 @@ def _stiffness_along(vm, b, direction: np.ndarray):
 
 
 def _max_eig(res) -> float:
-    ev = res.eigenvalues
-    return float(ev.max()) if ev.size else -np.inf
+    """The largest eigenvalue of eq. (23) (−inf without any): ``−margin``, so a long chain's
+    :class:`~vjm_pin.solver.stability.DeferredStability` is not asked for its whole spectrum."""
+    return -res.margin
 
 
 def _complement_rows(vm, d: np.ndarray) -> np.ndarray:
@@ -458,18 +459,23 @@ class _Tracer:
         if fast is not None:
             # k, the tangent of eq. (29) along d and μ in one pass (point_kernel)
             k, xd, fd, mu, rate = fast
-            p = _BP(s, eq, self.d @ eq.wrench, k, None, mu, lam)
-            if rate is not None and _analytic_rate:
-                p.dmu = rate
-            x_dot = self._zero_x.copy()
-            x_dot[self.free] = xd
-            w_dot = self._zero_w.copy()
-            w_dot[self.task] = fd
-            p.tan = (x_dot, w_dot)
-            return p
+            return self._kernel_point(eq, s, k, mu, lam, xd, fd, rate)
         k, st = _stiffness_along(self.vm, b, self.d)
         mu = _max_eig(check_stability_held(b, self.P))
         return _BP(s, eq, self.d @ eq.wrench, k, st, mu, lam)
+
+    def _kernel_point(self, eq: EquilibriumResult, s: float, k, mu, lam, xd, fd, rate) -> _BP:
+        """The point at ``eq`` from the point kernel's numbers: ``k``, ``μ``, its rate ``dμ/ds``
+        (None: not given) and the tangent of eq. (29) (``xd``: free coordinates, ``fd``: task rows)."""
+        p = _BP(s, eq, self.d @ eq.wrench, k, None, mu, lam)
+        if rate is not None and _analytic_rate:
+            p.dmu = rate
+        x_dot = self._zero_x.copy()
+        x_dot[self.free] = xd
+        w_dot = self._zero_w.copy()
+        w_dot[self.task] = fd
+        p.tan = (x_dot, w_dot)
+        return p
 
     def tangent(self, p: _BP):
         """(dx/ds (nq,), dF/ds (6,)) along the branch at ``p`` (eq. 29), or None."""
@@ -629,14 +635,7 @@ class _Tracer:
                 p = self.point(eq, s)
             else:
                 lam = float(ev[-1]) if ev.size else -np.inf  # (ascending: _max_eig)
-                p = _BP(s, eq, self.d @ w, k, None, mu, lam)
-                if pa[5] and _analytic_rate:
-                    p.dmu = rate
-                x_dot = self._zero_x.copy()
-                x_dot[self.free] = xd
-                w_dot = self._zero_w.copy()
-                w_dot[self.task] = fd
-                p.tan = (x_dot, w_dot)
+                p = self._kernel_point(eq, s, k, mu, lam, xd, fd, rate if pa[5] else None)
         p.hist = (a.s, t[0], t[1])
         return p
 
@@ -1041,11 +1040,10 @@ def _other_branches(
     return tuple(branches)
 
 
-def _unloaded(vm, solver, d, kin) -> EquilibriumResult | None:
-    """The unloaded reference as the first point when the chain is rigid along ``d``
-    there (straight chain of rigid links, Model A S): the force at zero deflection is then
-    indeterminate and the solver's perturbed start would pick an arbitrary one; the
-    unloaded state (zero wrench) is the natural start of the curve."""
+def _reference_equilibrium(vm, solver, kin) -> EquilibriumResult | None:
+    """The unloaded reference configuration as a converged equilibrium under zero wrench
+    (path ``"reference"``, 0 iterations, its eq. (23) verdict), or None when a spring is
+    preloaded there (``K_θ(θ − θ₀) ≠ 0``: not an equilibrium without load)."""
     from vjm_pin.solver import blocks_at
     from vjm_pin.solver.stability import check_stability
 
@@ -1054,7 +1052,7 @@ def _unloaded(vm, solver, d, kin) -> EquilibriumResult | None:
     if stat.size and np.abs(stat).max() > 0:
         return None
     b = blocks_at(vm, x, np.zeros(6), kin)
-    probe = EquilibriumResult(
+    return EquilibriumResult(
         x=x,
         q=x[vm.q_idx].copy(),
         theta=x[vm.theta_idx].copy(),
@@ -1069,7 +1067,15 @@ def _unloaded(vm, solver, d, kin) -> EquilibriumResult | None:
         path="reference",
         stability=check_stability(b),
     )
-    if not np.isinf(tangent_stiffness(vm, probe, d, kin)):
+
+
+def _unloaded(vm, solver, d, kin) -> EquilibriumResult | None:
+    """The unloaded reference as the first point when the chain is rigid along ``d``
+    there (straight chain of rigid links, Model A S): the force at zero deflection is then
+    indeterminate and the solver's perturbed start would pick an arbitrary one; the
+    unloaded state (zero wrench) is the natural start of the curve."""
+    probe = _reference_equilibrium(vm, solver, kin)
+    if probe is None or not np.isinf(tangent_stiffness(vm, probe, d, kin)):
         return None
     return probe
 
@@ -1116,6 +1122,29 @@ def _follow(tr: _Tracer, first: _BP, rigid: bool, s_grid, progress, make_point):
     return tuple(points), critical
 
 
+def _mechanism_solver(vm, solver, loads, gravity, what: str) -> MechanismSolver:
+    """``solver`` for a run on the mechanism solver of ``vm`` (``what``: the run's name in the
+    message), or a new :class:`~vjm_pin.solver.mechanism.MechanismSolver` with the dead loads and
+    gravity when None.
+
+    Raises:
+        InputError: a solver of another kind or of another model, or dead loads given both to
+            the passed solver and here.
+    """
+    if solver is None:
+        return MechanismSolver(vm, loads=loads, gravity=gravity)
+    if not isinstance(solver, MechanismSolver):
+        raise InputError(
+            f"this {what} needs the mechanism solver (loop closures, dead loads or a free task frame): "
+            "pass a MechanismSolver as solver, or none"
+        )
+    if loads or gravity is not None:
+        raise InputError("give the dead loads and gravity to the MechanismSolver passed as solver, not twice")
+    if solver.vm is not vm:
+        raise InputError("the solver was built for another model")
+    return solver
+
+
 def _trace_mechanism(vm, d, max_deflection, steps, solver, refine_tol, all_branches, progress, loads, gravity, free):
     """:func:`trace_curve` on :class:`~vjm_pin.solver.mechanism.MechanismSolver`
     (:mod:`vjm_pin.analysis.mechanism_curve`)."""
@@ -1125,17 +1154,7 @@ def _trace_mechanism(vm, d, max_deflection, steps, solver, refine_tol, all_branc
         raise InputError(
             "all_branches (the unstable branches) is only traced for serial chains without dead loads"
         )
-    if solver is None:
-        solver = MechanismSolver(vm, loads=loads, gravity=gravity)
-    elif not isinstance(solver, MechanismSolver):
-        raise InputError(
-            "this curve needs the mechanism solver (loop closures, dead loads or a free task frame): "
-            "pass a MechanismSolver as solver, or none"
-        )
-    elif loads or gravity is not None:
-        raise InputError("give the dead loads and gravity to the MechanismSolver passed as solver, not twice")
-    if solver.vm is not vm:
-        raise InputError("the solver was built for another model")
+    solver = _mechanism_solver(vm, solver, loads, gravity, "curve")
     if free:
         check_free_direction(d)
     tr = MechanismTracer(vm, d, max_deflection, solver, refine_tol, bool(free))

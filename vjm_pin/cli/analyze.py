@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from vjm_pin.cli.common import MAX_SUBDIVIDE, add_load_option, int_range
+from vjm_pin.cli.common import add_dead_load_options, add_subdivide_option
 
 EXAMPLES = (
     "vjm-pin analyze paper-a-s --deflection -0.001 0 0",
@@ -116,12 +116,7 @@ def add_parser(sub):
         metavar="MASS",
         help="payload mass (kg) at the end frame origin",
     )
-    p.add_argument(
-        "--gravity",
-        action="store_true",
-        help="load every link with its weight at its centre of mass (URDF inertials; 9.80665 m/s² along −z)",
-    )
-    add_load_option(p)
+    add_dead_load_options(p)
     p.add_argument(
         "--method",
         choices=("eq30", "eq32", "eq33"),
@@ -130,14 +125,7 @@ def add_parser(sub):
         "closures or dead loads: eq. 28 bordered with the closure rows, and eq30/eq32/eq33 with the "
         "closure rows bordered like passive joints; all agree where defined)",
     )
-    p.add_argument(
-        "--subdivide",
-        type=int_range(1, MAX_SUBDIVIDE),
-        default=1,
-        metavar="K",
-        help="split every beam link into K sub-links (models whose springs keep <vjm:beam>; "
-        f"K from 1 to {MAX_SUBDIVIDE})",
-    )
+    add_subdivide_option(p)
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
     p.set_defaults(func=run)
 

@@ -306,6 +306,46 @@ def add_load_option(parser) -> None:
     )
 
 
+def add_dead_load_options(parser) -> None:
+    """``--gravity`` (every link's weight) and ``--load`` (:func:`add_load_option`), in that order,
+    as ``analyze``, ``curve`` and ``critical`` take them."""
+    parser.add_argument(
+        "--gravity",
+        action="store_true",
+        help="load every link with its weight at its centre of mass (URDF inertials; 9.80665 m/s² along −z)",
+    )
+    add_load_option(parser)
+
+
+def add_subdivide_option(parser) -> None:
+    """``--subdivide K`` (1 to :data:`MAX_SUBDIVIDE`, default 1): the model's beam links split into
+    ``K`` sub-links when it is loaded."""
+    parser.add_argument(
+        "--subdivide",
+        type=int_range(1, MAX_SUBDIVIDE),
+        default=1,
+        metavar="K",
+        help="split every beam link into K sub-links (models whose springs keep <vjm:beam>; "
+        f"K from 1 to {MAX_SUBDIVIDE})",
+    )
+
+
+def add_model_direction(parser) -> None:
+    """``MODEL`` (a VJM URDF path or a bundled name) and the required ``--direction`` of the end
+    deflection, as ``curve`` and ``critical`` take them (checked by :func:`direction_vector`)."""
+    parser.add_argument(
+        "model", metavar="MODEL", help="VJM URDF path or bundled model name (see 'vjm-pin models')"
+    )
+    parser.add_argument(
+        "--direction",
+        nargs="+",
+        type=float,
+        required=True,
+        metavar="D",
+        help="DX DY DZ [RX RY RZ]: direction of the end deflection, world axes (normalised)",
+    )
+
+
 def loads_from_args(args) -> tuple:
     """The :class:`~vjm_pin.kinematics.dead_loads.Load` tuple of ``--load`` (empty when absent).
 

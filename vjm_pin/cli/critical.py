@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 from vjm_pin.cli.common import (
-    MAX_SUBDIVIDE,
-    add_load_option,
+    add_dead_load_options,
+    add_model_direction,
+    add_subdivide_option,
     float_range,
-    int_range,
     positive_float,
 )
 
@@ -58,17 +58,7 @@ def add_parser(sub):
             "there is no critical point up to --max-deflection or the search does not converge."
         ),
     )
-    p.add_argument(
-        "model", metavar="MODEL", help="VJM URDF path or bundled model name (see 'vjm-pin models')"
-    )
-    p.add_argument(
-        "--direction",
-        nargs="+",
-        type=float,
-        required=True,
-        metavar="D",
-        help="DX DY DZ [RX RY RZ]: direction of the end deflection, world axes (normalised)",
-    )
+    add_model_direction(p)
     p.add_argument(
         "--max-deflection",
         type=positive_float,
@@ -82,25 +72,14 @@ def add_parser(sub):
         default=1e-7,
         help=f"relative force tolerance of the critical point (from {RTOL_RANGE[0]:g} to {RTOL_RANGE[1]:g}, default 1e-7)",
     )
-    p.add_argument(
-        "--subdivide",
-        type=int_range(1, MAX_SUBDIVIDE),
-        default=1,
-        metavar="K",
-        help=f"split every beam link into K sub-links (models whose springs keep <vjm:beam>; K from 1 to {MAX_SUBDIVIDE})",
-    )
+    add_subdivide_option(p)
     p.add_argument(
         "--free",
         action="store_true",
         help="hold only the component along DIRECTION: the end (a parallel robot's platform) is free "
         "across it, with no load there (default: every task component held)",
     )
-    p.add_argument(
-        "--gravity",
-        action="store_true",
-        help="load every link with its weight at its centre of mass (URDF inertials; 9.80665 m/s² along −z)",
-    )
-    add_load_option(p)
+    add_dead_load_options(p)
     p.add_argument(
         "--json",
         action="store_true",

@@ -5,9 +5,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from vjm_pin.cli.common import (
-    MAX_SUBDIVIDE,
     OUTPUT_NOTE,
-    add_load_option,
+    add_dead_load_options,
+    add_model_direction,
+    add_subdivide_option,
     float_range,
     int_range,
     positive_float,
@@ -88,17 +89,7 @@ def add_parser(sub):
 
 def _add_options(p) -> None:
     """The arguments and options of ``vjm-pin curve``."""
-    p.add_argument(
-        "model", metavar="MODEL", help="VJM URDF path or bundled model name (see 'vjm-pin models')"
-    )
-    p.add_argument(
-        "--direction",
-        nargs="+",
-        type=float,
-        required=True,
-        metavar="D",
-        help="DX DY DZ [RX RY RZ]: direction of the end deflection, world axes (normalised)",
-    )
+    add_model_direction(p)
     p.add_argument(
         "--max-deflection",
         type=positive_float,
@@ -112,26 +103,14 @@ def _add_options(p) -> None:
     p.add_argument(
         "--all-branches", action="store_true", help="also trace the unstable branches (Fig. 4)"
     )
-    p.add_argument(
-        "--subdivide",
-        type=int_range(1, MAX_SUBDIVIDE),
-        default=1,
-        metavar="K",
-        help="split every beam link into K sub-links (models whose springs keep <vjm:beam>; "
-        f"K from 1 to {MAX_SUBDIVIDE})",
-    )
+    add_subdivide_option(p)
     p.add_argument(
         "--free",
         action="store_true",
         help="hold only the component along DIRECTION: the end (a parallel robot's platform) is free "
         "across it, with no load there (default: every task component held, nothing moves across it)",
     )
-    p.add_argument(
-        "--gravity",
-        action="store_true",
-        help="load every link with its weight at its centre of mass (URDF inertials; 9.80665 m/s² along −z)",
-    )
-    add_load_option(p)
+    add_dead_load_options(p)
     p.add_argument(
         "--refine-tol",
         type=float_range(*REFINE_TOL_RANGE),

@@ -664,85 +664,12 @@ class EquilibriumSolver:
     def _fast_newton_fused(self, x, p_t, r_t):
         """:meth:`_fast_newton` for chains of 1-DoF joints (screw-form Hessian): per iteration one
         Pinocchio call (frame Jacobian and end placement) and one call of the fused kernel
-        (:mod:`vjm_pin.solver.kernel`), with the same iterates, tests, caches and results."""
-        chain, kernel = _chain, _kernel
-        kin, m, n = self.kin, len(self.task), len(self.free)
-        model, fid, data = kin.model, kin.frame_id, None  # data: kin.data when first needed
-        step_fn = kernel.get()
+        (:mod:`vjm_pin.solver.kernel`), with the same iterates, tests, caches and results
+        (:meth:`_fused_iterations`, with ``VJM_PIN_JIT`` read now and the kernel's own call)."""
         consts, thr = self._kernel_consts()
-        pt = np.asarray(p_t, float)
-        rt = np.asarray(r_t, float)
-        consts = kernel.with_target(consts, pt)
-        rot = self._ir.size > 0
-        flush = bool(chain._flush_enabled)
-        lwa = pin.LOCAL_WORLD_ALIGNED
-        nv = model.nv
-        zero3 = self._zero3  # (read only)
-        dummy = _KERNEL_DUMMY
-        kkt_prev = np.inf
-        polish = 0
-        x = np.array(x, dtype=float)
-        fact = self._fast_fact
-        if fact is None or fact[0] != x.tobytes():  # (the last equilibrium is flushed already)
-            flush_tiny(x)
-        for it in range(self._fast_max_iter + 1 + POLISH_ITERATIONS):
-            key = x.tobytes()
-            fact = self._fast_fact
-            if fact is not None and fact[0] == key and fact[1] is kin and fact[-1] is step_fn:
-                # a warm start from the equilibrium this solver just found (the target does not
-                # enter the factorisation; a factorisation by the other implementation is redone)
-                st = fact[2]
-                kf = fact[3:11]  # (jac, qf, rr, f, r, tau, hz, f6), read only
-                j6, pos, rotm, refactor = dummy[8], st.position, st.rotation, False
-            else:
-                if data is None:
-                    data = kin.data
-                j6 = pin.computeFrameJacobian(model, data, x, fid, lwa)
-                if j6.ndim != 2 or not j6.flags.c_contiguous:
-                    j6 = np.ascontiguousarray(j6).reshape(6, nv)
-                mo = data.oMf[fid]
-                pos, rotm = mo.translation, (mo.rotation if rot else None)
-                st, kf, refactor = None, dummy[:8], True
-            erot = pin.log3(rt @ rotm.T) if rot else zero3
-            status, kkt, ep, er, rs, kf, _, xn, ev = step_fn(
-                j6, pos, erot, x, refactor, polish < POLISH_ITERATIONS, flush, False, kf, consts
-            )
-            if status == kernel.FACTOR_FAIL:
-                return None
-            if status == kernel.POLISH:
-                polish += 1
-                x = xn
-                kkt_prev = np.inf
-                continue
-            if status == kernel.RANK_FAIL:
-                return None
-            if status == kernel.CONVERGED:
-                stable = bool(ev.size == 0 or ev[-1] < -thr)  # (ascending)
-                if self.follow_stable and not stable:
-                    self._fast_its = it
-                    return None
-                jac, qf, rr, f, r, tau, hz, f6 = kf
-                if st is None:
-                    st = _built(KinematicState, {"position": pos.copy(), "rotation": mo.rotation.copy(), "jacobian": j6,
-                                                 "hessian": None})
-                    kin._last = (key, st)  # kin.evaluate(x, hessian=False) at this point: no Pinocchio call
-                stab = self._kernel_stability(stable, ev, n - m, thr, jac, hz, st)
-                res = {"position": float(ep), "orientation": float(er), "statics": float(rs)}
-                wkey = key + f6.tobytes()
-                self._fast_cache = (wkey + pt.tobytes() + rt.tobytes(), res, stab, x, f, f6, p_t, r_t)
-                self._fast_fact = (key, kin, st, jac, qf, rr, f, r, tau, hz, f6, step_fn)
-                # the Blocks at this equilibrium (as evaluate_blocks builds them), built when first
-                # asked for (a curve point's stiffness): kept lazily
-                remember_lazy(self.vm, kin, wkey, _blocks_builder(jac, hz, self.nt, self.vm.K_theta, st))
-                return x, f, it, st
-            self._fast_its = it
-            if it and not kkt < 0.5 * kkt_prev or it - polish >= self._fast_max_iter:
-                return None
-            if status != kernel.CONTINUE:
-                return None
-            x = xn
-            kkt_prev = kkt
-        return None
+        consts = _kernel.with_target(consts, np.asarray(p_t, float))
+        raw = self._fused_iterations([None, consts, consts[1], thr, _kernel.get(), None, None], p_t, r_t, x)
+        return None if raw is None else raw[:4]
 
     def _kernel_stability(self, stable, ev, d, thr, jac, hz, st) -> StabilityResult:
         """The eq. (23) verdict of a fused-kernel convergence: all ``d`` eigenvalues from the dense
@@ -771,60 +698,83 @@ class EquilibriumSolver:
 
     def _corrector(self, ctx, p_t, r_t, x, flushed: bool = False):
         """:meth:`_fast_newton_fused` from ``x`` (a predicted point of a curve) towards the target
-        ``(p_t, r_t)``, as one lean loop for :meth:`~vjm_pin.analysis.curve._Tracer.step`: the same
-        iterations, tests, caches (``_fast_fact``, ``_fast_cache``, the kept Blocks) and numbers, with
-        the per-solve set-up done once per curve (``ctx`` from :meth:`_corrector_context`: the
-        environment read, the constants, the compiled kernel called directly with them unpacked).
+        ``(p_t, r_t)`` for :meth:`~vjm_pin.analysis.curve._Tracer.step`: the same iterations, tests,
+        caches and numbers (:meth:`_fused_iterations`), with the per-solve set-up done once per curve
+        (``ctx`` from :meth:`_corrector_context`: the environment read, the constants, the compiled
+        kernel called directly with them unpacked).
 
         Returns None when the plain local iteration gives way (``_fast_its`` set, as
-        :meth:`_fast_newton`), else the raw equilibrium ``(x, f, iterations, state, fact, ev,
-        residuals, stability)`` (``fact`` = (J, Q or reflectors, R, F, r, ∇E, H(F), F (6,)) of the
-        kernel; build the result with :meth:`_corrector_result`). ``flushed``: ``x`` has no entry
-        below 1e-150 already (:func:`flush_tiny` would not change it)."""
-        chain, kernel = _chain, _kernel
-        kin, m, n = self.kin, len(self.task), len(self.free)
-        md, consts, cf, thr, step_fn, direct, _ = ctx
+        :meth:`_fast_newton`), else the raw equilibrium of :meth:`_fused_iterations` (build the
+        result with :meth:`_corrector_result`). ``flushed``: ``x`` has no entry below 1e-150
+        already (:func:`flush_tiny` would not change it)."""
+        kernel = _kernel
+        md, consts, _, _, step_fn, _, _ = ctx
         fn = kernel.get(md)
         if fn is not step_fn:  # first call, or auto mode switched to the compiled kernel
             small = getattr(fn, "dispatcher", None) is not None and int(consts[0][0]) < _chain_kernel_min_n()
             lean = kernel.lean() if small else None
-            ctx[4], ctx[5] = step_fn, direct = fn, ((lean,) + consts[2:] if lean is not None else None)
-            ctx[6] = kernel.workspace(consts[0], kin.model.nq) if lean is not None else None
-        model, fid, data = kin.model, kin.frame_id, kin.data
-        cf[9:12] = p_t  # kernel.with_target
+            ctx[4], ctx[5] = fn, ((lean,) + consts[2:] if lean is not None else None)
+            ctx[6] = kernel.workspace(consts[0], self.kin.model.nq) if lean is not None else None
+        self._fast_its = 0
+        return self._fused_iterations(ctx, p_t, r_t, x, flushed)
+
+    def _fused_iterations(self, ctx, p_t, r_t, x, flushed: bool = False):
+        """The fused local iteration of :meth:`_fast_newton_fused` and :meth:`_corrector` from ``x``
+        towards the target ``(p_t, r_t)``: per iteration one Pinocchio call (frame Jacobian and end
+        placement, none on a warm start from the equilibrium this solver just found) and one call
+        of the fused kernel; at convergence the eq. (23) verdict and the caches (``_fast_fact``,
+        ``_fast_cache``, the kept Blocks).
+
+        ``ctx``: ``[mode, consts, cf, thr, step function, direct call or None, its buffers]``
+        (:meth:`_corrector_context`; ``cf`` is ``consts``' float array, its target slots written
+        here); the direct call (:func:`vjm_pin.solver.kernel.lean` with the constants unpacked)
+        writes into the buffers, replaced by fresh ones at convergence. Returns None when the plain
+        local iteration gives way (``_fast_its`` set where it counts iterations), else
+        ``(x, f, iterations, state, fact, ev, residuals, stability)`` (``fact`` = (J, Q or
+        reflectors, R, F, r, ∇E, H(F), F (6,)) of the kernel)."""
+        chain, kernel = _chain, _kernel
+        kin, m, n = self.kin, len(self.task), len(self.free)
+        _, consts, cf, thr, step_fn, direct, _ = ctx
+        model, fid, data = kin.model, kin.frame_id, None  # data: kin.data when first needed
+        pt = np.asarray(p_t, float)
+        rt = np.asarray(r_t, float)
+        cf[9:12] = pt  # kernel.with_target
         rot = self._ir.size > 0
         flush = bool(chain._flush_enabled)
         lwa = pin.LOCAL_WORLD_ALIGNED
-        zero3 = self._zero3
+        zero3 = self._zero3  # (read only)
         dummy = _KERNEL_DUMMY
         ci = consts[0]
         if direct is not None:
             lean, kz, mask, theta0, vscale, escale = direct
         cont_, polish_, conv_ = kernel.CONTINUE, kernel.POLISH, kernel.CONVERGED
-        self._fast_its = 0
         kkt_prev = np.inf
         polish = 0
         x = np.array(x, dtype=float)
         if not flushed:
             fact = self._fast_fact
-            if fact is None or fact[0] != x.tobytes():
+            if fact is None or fact[0] != x.tobytes():  # (the last equilibrium is flushed already)
                 flush_tiny(x)
         mo = None
         for it in range(self._fast_max_iter + 1 + POLISH_ITERATIONS):
             key = x.tobytes()
             fact = self._fast_fact
             if fact is not None and fact[0] == key and fact[1] is kin and fact[-1] is step_fn:
+                # a warm start from the equilibrium this solver just found (the target does not
+                # enter the factorisation; a factorisation by the other implementation is redone)
                 st = fact[2]
-                kf = fact[3:11]
+                kf = fact[3:11]  # (jac, qf, rr, f, r, tau, hz, f6), read only
                 j6, pos, rotm, refactor = dummy[8], st.position, st.rotation, False
             else:
+                if data is None:
+                    data = kin.data
                 j6 = pin.computeFrameJacobian(model, data, x, fid, lwa)
                 if j6.ndim != 2 or not j6.flags.c_contiguous:
                     j6 = np.ascontiguousarray(j6).reshape(6, model.nv)
                 mo = data.oMf[fid]
                 pos, rotm = mo.translation, (mo.rotation if rot else None)
                 st, kf, refactor = None, dummy[:8], True
-            erot = pin.log3(r_t @ rotm.T) if rot else zero3
+            erot = pin.log3(rt @ rotm.T) if rot else zero3
             if direct is not None:  # the compiled kernel, its arrays into the buffers (kernel.lean)
                 xout, ws = ctx[6]
                 status, kkt, ep, er, rs = lean(
@@ -858,12 +808,14 @@ class EquilibriumSolver:
                 if st is None:
                     st = _built(KinematicState, {"position": pos.copy(), "rotation": mo.rotation.copy(), "jacobian": j6,
                                                  "hessian": None})
-                    kin._last = (key, st)
+                    kin._last = (key, st)  # kin.evaluate(x, hessian=False) at this point: no Pinocchio call
                 stab = self._kernel_stability(stable, ev, n - m, thr, jac, hz, st)
                 res = {"position": float(ep), "orientation": float(er), "statics": float(rs)}
                 wkey = key + f6.tobytes()
-                self._fast_cache = (wkey + p_t.tobytes() + r_t.tobytes(), res, stab, x, f, f6, p_t, r_t)
+                self._fast_cache = (wkey + pt.tobytes() + rt.tobytes(), res, stab, x, f, f6, p_t, r_t)
                 self._fast_fact = (key, kin, st, jac, qf, rr, f, r, tau, hz, f6, step_fn)
+                # the Blocks at this equilibrium (as evaluate_blocks builds them), built when first
+                # asked for (a curve point's stiffness): kept lazily
                 remember_lazy(self.vm, kin, wkey, _blocks_builder(jac, hz, self.nt, self.vm.K_theta, st))
                 return x, f, it, st, kf, ev, res, stab
             self._fast_its = it
@@ -874,7 +826,6 @@ class EquilibriumSolver:
             x = xn
             kkt_prev = kkt
         return None
-
     def _corrector_result(self, raw, p_t, r_t, path: str = "newton+tangent-predictor") -> EquilibriumResult:
         """The :class:`EquilibriumResult` of a converged :meth:`_corrector` (what :meth:`_result`
         builds from the fused iteration's convergence)."""
