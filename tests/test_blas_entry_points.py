@@ -1,6 +1,6 @@
 """Public entry points that do dense linear algebra before any solve run under one BLAS thread
-too (vjm_pin/solver/threads.py): ``EquilibriumSolver(vm)`` (inverts K_θ and the metric, order
-6n on a k-subdivided model) and ``unloaded_stiffness``. Found by CPU time above wall time in a
+too (vjm_pin/solver/threads.py): ``EquilibriumSolver`` (its inverses of K_θ and of the metric,
+order 6n on a k-subdivided model, built when first read) and ``unloaded_stiffness``. Found by CPU time above wall time in a
 single-process solve: the second OpenBLAS thread worked outside the limit."""
 
 from __future__ import annotations
@@ -22,9 +22,14 @@ def test_solver_setup_runs_under_one_blas_thread(two_blas_threads, monkeypatch):
         return inv(a)
 
     monkeypatch.setattr(np.linalg, "inv", recording_inv)
-    EquilibriumSolver(resolve_model("paper-c-s"))
-    assert seen and all(n == 1 for s in seen for n in s), seen
+    s = EquilibriumSolver(resolve_model("paper-c-s"))
+    assert all(n == 1 for s in seen for n in s), seen
+    # K_θ⁻¹ and the metric's inverse are built when first read, also under one thread
+    kinv, minv = s.Kinv, s.Minv
+    assert len(seen) >= 2 and all(n == 1 for s in seen for n in s), seen
     assert all(n == 2 for n in blas_threads())  # restored
+    np.testing.assert_allclose(kinv @ s.vm.K_theta, np.eye(s.nt), atol=1e-9)
+    assert s.Kinv is kinv and s.Minv is minv  # built once
 
 
 def test_unloaded_stiffness_runs_under_one_blas_thread(two_blas_threads, monkeypatch):

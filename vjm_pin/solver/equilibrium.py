@@ -69,6 +69,7 @@ Public API (stable; names as in the docstrings below)::
 from __future__ import annotations
 
 import copy
+import functools
 import inspect
 import math
 from dataclasses import MISSING as _MISSING
@@ -120,7 +121,7 @@ from vjm_pin.solver.stability import (
     spectral_norm,
 )
 from vjm_pin.solver.stiffness import stiffness_from_blocks
-from vjm_pin.solver.threads import one_blas_thread
+from vjm_pin.solver.threads import one_blas_thread, single_blas_thread
 
 METHODS = ("newton", "fixed-point")
 #: A converged iterate is polished by up to this many further Newton steps while the step
@@ -452,10 +453,6 @@ class EquilibriumSolver:
         prism = np.array([vm.model.joints[i + 1].shortname().startswith("JointModelP") for i in range(vm.model.nv)])
         self.var_scale = np.where(prism[self.free], self.length_scale, 1.0)
         self.kscale = float(np.abs(vm.K_theta).max())
-        self.Kinv = np.linalg.inv(vm.K_theta)
-        metric = np.diag(1e-6 * self.kscale / self.var_scale**2)
-        metric[: self.nt, : self.nt] += vm.K_theta
-        self.Minv = np.linalg.inv(metric)
         # per-task-row scale of pose errors (m rows by L_c, rad rows by 1), and the row groups
         self._err_scale = np.where(np.array(self.task) < 3, self.length_scale, 1.0)
         self._rows_p = [i for i, t in enumerate(self.task) if t < 3]
@@ -670,6 +667,22 @@ class EquilibriumSolver:
         consts = _kernel.with_target(consts, np.asarray(p_t, float))
         raw = self._fused_iterations([None, consts, consts[1], thr, _kernel.get(), None, None], p_t, r_t, x)
         return None if raw is None else raw[:4]
+
+    @functools.cached_property
+    def Kinv(self) -> np.ndarray:
+        """``K_θ⁻¹`` (rad/(N·m) or m/N): the compliant start of the restoration and the fixed-point
+        start (built when first needed: an order-6n inversion a curve of fast solves never uses)."""
+        with single_blas_thread():
+            return np.linalg.inv(self.vm.K_theta)
+
+    @functools.cached_property
+    def Minv(self) -> np.ndarray:
+        """Inverse of the restoration's metric ``K_θ ⊕ 0 + 1e-6·max|K_θ| / s²`` (``s`` the variable
+        scale: ``L_c`` for prismatic coordinates, 1 otherwise); built when first needed."""
+        metric = np.diag(1e-6 * self.kscale / self.var_scale**2)
+        metric[: self.nt, : self.nt] += self.vm.K_theta
+        with single_blas_thread():
+            return np.linalg.inv(metric)
 
     def _kernel_stability(self, stable, ev, d, thr, jac, hz, st) -> StabilityResult:
         """The eq. (23) verdict of a fused-kernel convergence: all ``d`` eigenvalues from the dense
