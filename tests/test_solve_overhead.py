@@ -161,8 +161,9 @@ def test_warm_start_rank_check_reads_the_jacobian_at_the_start(solver):
     assert fact[3].shape == ref.shape and np.abs(fact[3] - ref).max() <= 1e-14 * np.abs(ref).max()
 
 
+@pytest.mark.filterwarnings("error")  # huge finite entries: no overflow warning for the user
 @pytest.mark.parametrize("values", [[1.0, 2.0], [np.nan, 1.0], [np.inf, 1.0], [-np.inf, np.inf], [1e308, 1e308],
-                                    [1e308, np.nan], [], [0.0]])
+                                    [1e308, np.nan], [-1e308, 1e308], [np.nan, np.inf], [], [0.0]])
 def test_all_finite_is_isfinite_all(values):
     a = np.array(values, float)
     assert eq._all_finite(a) == bool(np.isfinite(a).all())

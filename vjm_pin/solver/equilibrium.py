@@ -329,9 +329,10 @@ def _chain_kernel_min_n() -> int:
 
 
 def _all_finite(a: np.ndarray) -> bool:
-    """``np.isfinite(a).all()`` for a float array, by its sum first (one call: a finite sum has
-    no NaN or inf in it; a sum that overflowed is checked element by element)."""
-    return math.isfinite(a.sum()) or bool(np.isfinite(a).all())
+    """``np.isfinite(a).all()`` for a float array, without its temporary boolean array: the largest
+    and smallest entries are finite (NaN propagates through both; no arithmetic, so no overflow
+    warning for huge finite entries)."""
+    return not a.size or (math.isfinite(a.max()) and math.isfinite(a.min()))
 
 
 def _singular_values(a: np.ndarray) -> np.ndarray:
