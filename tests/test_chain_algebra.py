@@ -484,3 +484,35 @@ def test_without_numba_only_very_long_chains_take_the_chain_path(monkeypatch):
     vm = paper("c", 6)  # 110 free coordinates: dense is faster than the numpy recursion
     kin = Kinematics(vm.model, vm.frame_id)
     assert evaluate_blocks(vm, kin, vm.reference + 0.01, np.array([-0.05, 0, 0, 0, 0, 0])).chain is None
+
+
+def test_layout_pseudo_inverse_is_the_blocks_pseudo_inverse():
+    """``K_θ``'s block pseudo-inverses (one stacked ``pinv`` per block size) against block-by-block
+    ``np.linalg.pinv`` and the Moore–Penrose conditions, with zero, singular and mixed-size blocks."""
+    rng = np.random.default_rng(3)
+    sizes = [1, 3, 6, 1, 5, 3, 3, 6, 2, 1]
+    starts = np.concatenate([[0], np.cumsum(sizes)])
+    n = int(starts[-1])
+    kd = np.zeros((n, 6))
+    for i, sz in enumerate(sizes):
+        g = rng.standard_normal((sz, sz)) * 10.0 ** rng.uniform(-2, 6)
+        blk = g @ g.T
+        if i in (3, 8):
+            blk[:] = 0.0  # a passive joint, a decoupled pair with no springs
+        if i == 5:
+            blk[0, :] = blk[:, 0] = 0.0  # singular
+        kd[starts[i]:starts[i + 1], :sz] = blk
+    lay = ca.ChainLayout(np.arange(n), np.arange(n), starts, kd)
+    kp = lay._k_pinv
+    for i, sz in enumerate(sizes):
+        blk = kd[starts[i]:starts[i + 1], :sz]
+        got = kp[starts[i]:starts[i + 1], :sz]
+        assert not kp[starts[i]:starts[i + 1], sz:].any()
+        if not blk.any():
+            assert not got.any()
+            continue
+        ref = np.linalg.pinv(blk)
+        assert np.abs(got - ref).max() <= 1e-15 * np.abs(ref).max()
+        scale = np.abs(blk).max() * np.abs(got).max()
+        assert np.abs(blk @ got @ blk - blk).max() <= 1e-9 * np.abs(blk).max() * scale
+        assert np.abs(got @ blk @ got - got).max() <= 1e-9 * np.abs(got).max() * scale

@@ -47,6 +47,8 @@ import sys
 
 import numpy as np
 
+from vjm_pin.solver.chain_kernel import _rate_lin, _rate_terms, _twists
+from vjm_pin.solver.kernel import _back_substitute
 from vjm_pin.solver.lapack import lapack as _lapack
 from vjm_pin.solver.stability import SCIPY_LAPACK_MAX_N
 from vjm_pin.solver.stiffness import SINGULAR_RCOND, _inverse_if_regular, eq28_matrix
@@ -669,18 +671,8 @@ def _point_loops(jfree, hz, kz, task, dt, mask, wrench, nt, use_rate, fast_rank,
         for r in range(n):
             s += q[r, j] * res[r]
         yr[j] = s
-    g = np.zeros(m)  # R g = Yᵀ res (back substitution)
-    for i in range(m - 1, -1, -1):
-        s = yr[i]
-        for j in range(i + 1, m):
-            s -= rmat[i, j] * g[j]
-        g[i] = s / rmat[i, i]
-    om = np.empty((n, 3))
-    li = np.empty((n, 3))
-    for c in range(n):
-        for a3 in range(3):
-            li[c, a3] = jfree[a3, c]
-            om[c, a3] = jfree[3 + a3, c]
+    g = _back_substitute(rmat, yr, m)  # R g = Yᵀ res
+    li, om = _twists(jfree)
     dom = np.empty((n, 3))
     dli = np.empty((n, 3))
     for i in range(n):
@@ -705,36 +697,8 @@ def _point_loops(jfree, hz, kz, task, dt, mask, wrench, nt, use_rate, fast_rank,
         dli[i, 0] = o1 * li[i, 2] - o2 * li[i, 1] + om[i, 1] * p2 - om[i, 2] * p1
         dli[i, 1] = o2 * li[i, 0] - o0 * li[i, 2] + om[i, 2] * p0 - om[i, 0] * p2
         dli[i, 2] = o0 * li[i, 1] - o1 * li[i, 0] + om[i, 0] * p1 - om[i, 1] * p0
-    # F and δF (task rows of δF; the other components carry no wrench)
-    wdot = np.zeros(6)
-    for r in range(m):
-        wdot[task[r]] = fd[r]
-    f0, f1, f2, m0, m1, m2 = wrench[0], wrench[1], wrench[2], wrench[3], wrench[4], wrench[5]
-    g0, g1, g2, n0, n1, n2 = wdot[0], wdot[1], wdot[2], wdot[3], wdot[4], wdot[5]
     # per column: a = v×f + ω×m, da = δv×f + v×δf + δω×m + ω×δm, b = v×f, db = δv×f + v×δf
-    aa = np.empty((n, 3))
-    da = np.empty((n, 3))
-    bb = np.empty((n, 3))
-    db = np.empty((n, 3))
-    for c in range(n):
-        v0, v1, v2 = li[c, 0], li[c, 1], li[c, 2]
-        w0_, w1_, w2_ = om[c, 0], om[c, 1], om[c, 2]
-        dv0, dv1, dv2 = dli[c, 0], dli[c, 1], dli[c, 2]
-        dw0, dw1, dw2 = dom[c, 0], dom[c, 1], dom[c, 2]
-        b0 = v1 * f2 - v2 * f1
-        b1 = v2 * f0 - v0 * f2
-        b2 = v0 * f1 - v1 * f0
-        bb[c, 0], bb[c, 1], bb[c, 2] = b0, b1, b2
-        aa[c, 0] = b0 + w1_ * m2 - w2_ * m1
-        aa[c, 1] = b1 + w2_ * m0 - w0_ * m2
-        aa[c, 2] = b2 + w0_ * m1 - w1_ * m0
-        e0 = dv1 * f2 - dv2 * f1 + v1 * g2 - v2 * g1
-        e1 = dv2 * f0 - dv0 * f2 + v2 * g0 - v0 * g2
-        e2 = dv0 * f1 - dv1 * f0 + v0 * g1 - v1 * g0
-        db[c, 0], db[c, 1], db[c, 2] = e0, e1, e2
-        da[c, 0] = e0 + dw1 * m2 - dw2 * m1 + w1_ * n2 - w2_ * n1
-        da[c, 1] = e1 + dw2 * m0 - dw0 * m2 + w2_ * n0 - w0_ * n2
-        da[c, 2] = e2 + dw0 * m1 - dw1 * m0 + w0_ * n1 - w1_ * n0
+    aa, da, bb, db = _rate_terms(li, om, dli, dom, wrench, fd, task)
     quad = 0.0
     for i in range(n):
         acc = 0.0
@@ -747,16 +711,7 @@ def _point_loops(jfree, hz, kz, task, dt, mask, wrench, nt, use_rate, fast_rank,
                 hd += om[i, 0] * db[j, 0] + om[i, 1] * db[j, 1] + om[i, 2] * db[j, 2]
             acc += hd * w[j]
         quad += w[i] * acc
-    # gᵀ (J' w) on the task rows
-    jw = np.zeros(6)
-    for c in range(n):
-        for a3 in range(3):
-            jw[a3] += dli[c, a3] * w[c]
-            jw[3 + a3] += dom[c, a3] * w[c]
-    lin = 0.0
-    for r in range(m):
-        lin += g[r] * jw[task[r]]
-    return 0, k, xd, fd, mu, quad - 2.0 * lin
+    return 0, k, xd, fd, mu, quad - 2.0 * _rate_lin(dli, dom, w, g, task)
 
 
 _compiled = None  # the compiled _point_loops once loaded, False when numba is unavailable
@@ -779,12 +734,19 @@ def compiled():
         except Exception:  # noqa: BLE001 - any import failure: the numpy path
             _compiled = False
             return _compiled
+        from vjm_pin.solver import chain_kernel
+
         g = globals()
         try:
+            chain_kernel._load()  # the dμ/ds helpers shared with the chain kernel, compiled there
+            for name in chain_kernel.RATE_HELPERS:
+                g[name] = getattr(chain_kernel, name)
             g["_top_eigpair"] = numba.njit(cache=True, nogil=True)(_top_eigpair)
             _compiled = numba.njit(cache=True, nogil=True)(_point_loops)
         except RuntimeError:  # no writable cache location: compile in memory
-            g["_top_eigpair"] = numba.njit(nogil=True)(getattr(_top_eigpair, "py_func", _top_eigpair))
+            for name in ("_top_eigpair", *chain_kernel.RATE_HELPERS):
+                fn = g[name]
+                g[name] = numba.njit(nogil=True)(getattr(fn, "py_func", fn))
             _compiled = numba.njit(nogil=True)(_point_loops)
     return _compiled
 

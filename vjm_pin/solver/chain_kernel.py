@@ -57,8 +57,21 @@ import threading
 
 import numpy as np
 
+from vjm_pin.solver import chain_algebra as _algebra
 from vjm_pin.solver import kernel as _kernel
-from vjm_pin.solver.chain_algebra import PIVOT_RCOND, RHO_FACTOR, SOLVE_RTOL
+from vjm_pin.solver.chain_algebra import PIVOT_RCOND, RHO_FACTOR, SOLVE_RTOL, _factor_loops, _split
+from vjm_pin.solver.chain_algebra import _matvec_loops as _matvec
+from vjm_pin.solver.chain_algebra import _solve_loops as _solve
+from vjm_pin.solver.kernel import (
+    _apply_qt,
+    _back_substitute,
+    _full_rank,
+    _hessian,
+    _moved_loops,
+    _multiplier,
+    _progress,
+    _qr_t,
+)
 
 #: Free coordinates from which the compiled fused iteration uses the chain kernel.
 ITERATE_MIN_N = 56
@@ -213,288 +226,12 @@ def _bordered(wd, wu, wv, wp, wq, starts, dpos, kp, cb):
     return bst, bd, bu, bv, bp, bq, s, rho
 
 
-def _inertia_small(a, nk, tiny):
-    """``(positive, negative, zero)`` of the symmetric ``a[:nk, :nk]`` (destroyed) by symmetric
-    elimination with Bunch–Parlett pivoting (1×1 or 2×2 pivots; Sylvester's law of inertia)."""
-    alpha = (1.0 + math.sqrt(17.0)) / 8.0
-    alive = np.ones(nk, np.bool_)
-    npos, nneg, nzero = 0, 0, 0
-    left = nk
-    while left > 0:
-        gd, idd = -1.0, -1
-        go, io, jo = 0.0, -1, -1
-        for i in range(nk):
-            if not alive[i]:
-                continue
-            if abs(a[i, i]) > gd:
-                gd, idd = abs(a[i, i]), i
-            for j in range(i + 1, nk):
-                if alive[j] and abs(a[i, j]) > go:
-                    go, io, jo = abs(a[i, j]), i, j
-        if gd >= alpha * go or left == 1:
-            piv = a[idd, idd]
-            if piv > tiny:
-                npos += 1
-            elif piv < -tiny:
-                nneg += 1
-            else:
-                nzero += 1
-            alive[idd] = False
-            left -= 1
-            if piv != 0.0:
-                for i in range(nk):
-                    if alive[i]:
-                        f = a[i, idd] / piv
-                        for j in range(nk):
-                            if alive[j]:
-                                a[i, j] -= f * a[idd, j]
-        else:
-            p11, p12, p22 = a[io, io], a[io, jo], a[jo, jo]
-            det = p11 * p22 - p12 * p12
-            if det < 0.0:
-                npos += 1
-                nneg += 1
-            elif det > 0.0:
-                if p11 + p22 > 0.0:
-                    npos += 2
-                else:
-                    nneg += 2
-            else:
-                nzero += 1
-                if p11 + p22 > 0.0:
-                    npos += 1
-                else:
-                    nneg += 1
-            alive[io] = False
-            alive[jo] = False
-            left -= 2
-            if det != 0.0:
-                i11, i12, i22 = p22 / det, -p12 / det, p11 / det
-                for i in range(nk):
-                    if alive[i]:
-                        c1 = a[i, io] * i11 + a[i, jo] * i12
-                        c2 = a[i, io] * i12 + a[i, jo] * i22
-                        for j in range(nk):
-                            if alive[j]:
-                                a[i, j] -= c1 * a[io, j] + c2 * a[jo, j]
-    return npos, nneg, nzero
-
-
 def _factor(starts, diag, u, v, p, q, symmetric):
-    """Block LU of the quasiseparable matrix (chain_algebra's ``_factor_loops``), the inertia of
-    the symmetric case by :func:`_inertia_small` per pivot block:
+    """Block LU of the quasiseparable matrix (chain_algebra's ``_factor_loops``, ``lean``: the
+    inertia of the symmetric case by :func:`_inertia_small` per pivot block):
     ``(pinv, x, y, rcond_min, bad, npos, nneg, nzero)``."""
-    n, r = u.shape
-    s = q.shape[1]
-    bmax = diag.shape[1]
-    pinv = np.zeros_like(diag)
-    x = np.zeros((n, r))
-    y = np.zeros((n, s))
-    g = np.zeros((r, s))
-    ug = np.zeros((bmax, s))
-    pi = np.zeros((bmax, bmax))
-    work = np.zeros((bmax, 2 * bmax))
-    vt = np.zeros((bmax, r))
-    sm = np.zeros((bmax, bmax))
-    rc_min = np.inf
-    npos, nneg, nzero = 0, 0, 0
-    for k in range(starts.shape[0] - 1):
-        a, e = starts[k], starts[k + 1]
-        nk = e - a
-        for i in range(nk):
-            for c in range(s):
-                t = 0.0
-                for l in range(r):
-                    t += u[a + i, l] * g[l, c]
-                ug[i, c] = t
-        ref_d, ref_c, ref_p = 0.0, 0.0, 0.0
-        for i in range(nk):
-            rd, rcr = 0.0, 0.0
-            for j in range(nk):
-                t = 0.0
-                for c in range(s):
-                    t += ug[i, c] * q[a + j, c]
-                pi[i, j] = diag[a + i, j] - t
-                rd += abs(diag[a + i, j])
-                rcr += abs(t)
-            ref_d = max(ref_d, rd)
-            ref_c = max(ref_c, rcr)
-        if symmetric:
-            for i in range(nk):
-                for j in range(i + 1, nk):
-                    t = 0.5 * (pi[i, j] + pi[j, i])
-                    pi[i, j] = t
-                    pi[j, i] = t
-        for i in range(nk):
-            rp = 0.0
-            for j in range(nk):
-                rp += abs(pi[i, j])
-            ref_p = max(ref_p, rp)
-        ref = max(ref_d, max(ref_c, ref_p))
-        if symmetric:
-            for i in range(nk):
-                for j in range(nk):
-                    sm[i, j] = pi[i, j]
-            cp, cn, cz = _inertia_small(sm, nk, 1e-14 * nk * ref)
-            npos += cp
-            nneg += cn
-            nzero += cz
-        for i in range(nk):
-            for j in range(nk):
-                work[i, j] = pi[i, j]
-                work[i, nk + j] = 1.0 if i == j else 0.0
-        ok = True
-        for col in range(nk):
-            best, piv = -1.0, col
-            for i in range(col, nk):
-                if abs(work[i, col]) > best:
-                    best, piv = abs(work[i, col]), i
-            if not (best > 0.0) or not math.isfinite(best):
-                ok = False
-                break
-            if piv != col:
-                for j in range(2 * nk):
-                    t = work[col, j]
-                    work[col, j] = work[piv, j]
-                    work[piv, j] = t
-            dv = work[col, col]
-            for j in range(2 * nk):
-                work[col, j] /= dv
-            for i in range(nk):
-                if i != col:
-                    f = work[i, col]
-                    if f != 0.0:
-                        for j in range(2 * nk):
-                            work[i, j] -= f * work[col, j]
-        if not ok:
-            return pinv, x, y, 0.0, True, npos, nneg, nzero
-        inv_norm = 0.0
-        for i in range(nk):
-            ri = 0.0
-            for j in range(nk):
-                t = work[i, nk + j]
-                pinv[a + i, j] = t
-                ri += abs(t)
-            inv_norm = max(inv_norm, ri)
-        if not math.isfinite(inv_norm):
-            return pinv, x, y, 0.0, True, npos, nneg, nzero
-        rc = 1.0 / (inv_norm * ref) if ref > 0.0 else 0.0
-        rc_min = min(rc_min, rc)
-        for i in range(nk):
-            for l in range(r):
-                t = 0.0
-                for c in range(s):
-                    t += q[a + i, c] * g[l, c]
-                vt[i, l] = v[a + i, l] - t
-        for i in range(nk):
-            for l in range(r):
-                t = 0.0
-                for j in range(nk):
-                    t += pinv[a + j, i] * vt[j, l]
-                x[a + i, l] = t
-            for c in range(s):
-                t = 0.0
-                for j in range(nk):
-                    t += pinv[a + i, j] * (p[a + j, c] - ug[j, c])
-                y[a + i, c] = t
-        for l in range(r):
-            for c in range(s):
-                t = 0.0
-                for i in range(nk):
-                    t += vt[i, l] * y[a + i, c]
-                g[l, c] += t
-    return pinv, x, y, rc_min, False, npos, nneg, nzero
-
-
-def _solve(starts, pinv, u, x, y, q, b):
-    """``M⁻¹ b`` from :func:`_factor` (chain_algebra's ``_solve_loops``)."""
-    n, nc = b.shape
-    r, s = u.shape[1], q.shape[1]
-    bmax = pinv.shape[1]
-    z = np.empty((n, nc))
-    zk = np.empty((bmax, nc))
-    acc = np.zeros((r, nc))
-    nb = starts.shape[0] - 1
-    for k in range(nb):
-        a, e = starts[k], starts[k + 1]
-        nk = e - a
-        for i in range(nk):
-            for c in range(nc):
-                t = b[a + i, c]
-                for l in range(r):
-                    t -= u[a + i, l] * acc[l, c]
-                zk[i, c] = t
-        for l in range(r):
-            for c in range(nc):
-                t = 0.0
-                for i in range(nk):
-                    t += x[a + i, l] * zk[i, c]
-                acc[l, c] += t
-        for i in range(nk):
-            for c in range(nc):
-                t = 0.0
-                for j in range(nk):
-                    t += pinv[a + i, j] * zk[j, c]
-                z[a + i, c] = t
-    out = np.empty((n, nc))
-    acc2 = np.zeros((s, nc))
-    for k in range(nb - 1, -1, -1):
-        a, e = starts[k], starts[k + 1]
-        nk = e - a
-        for i in range(nk):
-            for c in range(nc):
-                t = z[a + i, c]
-                for l in range(s):
-                    t -= y[a + i, l] * acc2[l, c]
-                out[a + i, c] = t
-        for l in range(s):
-            for c in range(nc):
-                t = 0.0
-                for i in range(nk):
-                    t += q[a + i, l] * out[a + i, c]
-                acc2[l, c] += t
-    return out
-
-
-def _matvec(starts, diag, u, v, p, q, x):
-    """``W x`` for the quasiseparable ``W`` (chain_algebra's ``_matvec_loops``), x (n, c)."""
-    n, nc = x.shape
-    r, s = u.shape[1], q.shape[1]
-    y = np.zeros((n, nc))
-    acc = np.zeros((r, nc))
-    nb = starts.shape[0] - 1
-    for k in range(nb):
-        a, e = starts[k], starts[k + 1]
-        for i in range(a, e):
-            for c in range(nc):
-                t = 0.0
-                for j in range(a, e):
-                    t += diag[i, j - a] * x[j, c]
-                for l in range(r):
-                    t += u[i, l] * acc[l, c]
-                y[i, c] = t
-        for l in range(r):
-            for c in range(nc):
-                t = 0.0
-                for i in range(a, e):
-                    t += v[i, l] * x[i, c]
-                acc[l, c] += t
-    acc2 = np.zeros((s, nc))
-    for k in range(nb - 1, -1, -1):
-        a, e = starts[k], starts[k + 1]
-        for i in range(a, e):
-            for c in range(nc):
-                t = 0.0
-                for l in range(s):
-                    t += p[i, l] * acc2[l, c]
-                y[i, c] += t
-        for l in range(s):
-            for c in range(nc):
-                t = 0.0
-                for i in range(a, e):
-                    t += q[i, l] * x[i, c]
-                acc2[l, c] += t
-    return y
+    pinv, x, y, info, counts = _factor_loops(starts, diag, u, v, p, q, symmetric, True)
+    return pinv, x, y, info[0], info[4] != 0.0, counts[0], counts[1], counts[2]
 
 
 def _shifted(bd, s, dpos, sigma):
@@ -673,18 +410,6 @@ def _inverse(starts, sd, su, sv, sp, sq, bst, pinv, bu, fx, fy, bq, s, rho, k, l
     return False, prev, v
 
 
-def _split(lo, hi, frac, atol):
-    if lo < 0.0 < hi and frac == 0.5:
-        return 0.0
-    if lo >= 0.0 and hi > max(lo, atol):
-        a = max(lo, atol)
-        return a * (hi / a) ** frac
-    if hi <= 0.0 and -lo > max(-hi, atol):
-        a = max(-hi, atol)
-        return -a * (-lo / a) ** (1.0 - frac)
-    return lo + frac * (hi - lo)
-
-
 def _smallest(starts, dpos, kp, jz, f6, kd, cb, scale, has_guess, gvec, vtol):
     """Smallest eigenvalue ``λ₁`` of ``Zᵀ W_s Z`` (``Z``: null space of ``cb``) and a unit
     eigenvector (chain order): ``(ok, λ₁, vector)`` (module docstring). ``gvec``: a previous
@@ -785,88 +510,82 @@ def _smallest(starts, dpos, kp, jz, f6, kd, cb, scale, has_guess, gvec, vtol):
     return False, 0.0, empty
 
 
-def _qr_t(jac, m, n):
-    """Householder QR of ``Jᵀ`` exactly as :func:`vjm_pin.solver.kernel._iterate_loops` (``hh``:
-    reflector rows, last row τ)."""
-    hh = np.zeros((m + 1, n))
-    hh[:m, :] = jac
-    for k in range(m):
-        alpha = hh[k, k]
-        xn2 = 0.0
-        for i in range(k + 1, n):
-            xn2 += hh[k, i] * hh[k, i]
-        xnorm = math.sqrt(xn2)
-        if xnorm == 0.0:
-            hh[m, k] = 0.0
-        else:
-            beta = -math.copysign(math.hypot(alpha, xnorm), alpha)
-            t = (beta - alpha) / beta
-            hh[m, k] = t
-            scal = 1.0 / (alpha - beta)
-            for i in range(k + 1, n):
-                hh[k, i] *= scal
-            hh[k, k] = beta
-            for j in range(k + 1, m):
-                s = hh[j, k]
-                for i in range(k + 1, n):
-                    s += hh[j, i] * hh[k, i]
-                s *= t
-                hh[j, k] -= s
-                for i in range(k + 1, n):
-                    hh[j, i] -= s * hh[k, i]
-    return hh
+def _gather(jsrc, idx, task):
+    """The Jacobian columns ``idx`` of ``jsrc`` (6 rows) in chain order, and their task rows:
+    ``(jz, cb)``."""
+    n = idx.shape[0]
+    m = task.shape[0]
+    jz = np.empty((6, n))
+    for c in range(n):
+        for a_ in range(6):
+            jz[a_, c] = jsrc[a_, idx[c]]
+    cb = np.empty((m, n))
+    for i in range(m):
+        for c in range(n):
+            cb[i, c] = jz[task[i], c]
+    return jz, cb
 
 
-def _apply_qt(hh, v, m, n):
-    out = v.copy()
-    for k in range(m):
-        t = hh[m, k]
-        if t == 0.0:
-            continue
-        s = out[k]
-        for i in range(k + 1, n):
-            s += hh[k, i] * out[i]
-        s *= t
-        out[k] -= s
-        for i in range(k + 1, n):
-            out[i] -= s * hh[k, i]
-    return out
+def _twists(jz):
+    """The columns of a (6, n) Jacobian as rows: ``(v, ω)``, each (n, 3)."""
+    n = jz.shape[1]
+    om = np.empty((n, 3))
+    li = np.empty((n, 3))
+    for c in range(n):
+        for a3 in range(3):
+            li[c, a3] = jz[a3, c]
+            om[c, a3] = jz[3 + a3, c]
+    return li, om
 
 
-def _moved(x, free, dx, flush):
-    xn = x.copy()
-    for c in range(free.shape[0]):
-        xn[free[c]] += dx[c]
-    if flush:
-        for i in range(xn.shape[0]):
-            if abs(xn[i]) < 1e-150:
-                xn[i] = 0.0
-    return xn
+def _rate_terms(li, om, dli, dom, wrench, fd, task):
+    """Per column of ``dμ/ds`` (:meth:`~vjm_pin.analysis.point_kernel.PointKernel.margin_rate`;
+    also :func:`~vjm_pin.analysis.point_kernel._point_loops`), with the wrench ``F = (f, m)`` and
+    its rate ``δF`` (task rows): ``a = v×f + ω×m``, ``da = δv×f + v×δf + δω×m + ω×δm``,
+    ``b = v×f``, ``db = δv×f + v×δf``: ``(a, da, b, db)``, each (n, 3)."""
+    n = li.shape[0]
+    wdot = np.zeros(6)
+    for i in range(task.shape[0]):
+        wdot[task[i]] = fd[i]
+    f0, f1, f2, m0, m1, m2 = wrench[0], wrench[1], wrench[2], wrench[3], wrench[4], wrench[5]
+    g0, g1, g2, n0, n1, n2 = wdot[0], wdot[1], wdot[2], wdot[3], wdot[4], wdot[5]
+    aa = np.empty((n, 3))
+    da = np.empty((n, 3))
+    bb = np.empty((n, 3))
+    db = np.empty((n, 3))
+    for c in range(n):
+        v0, v1, v2 = li[c, 0], li[c, 1], li[c, 2]
+        w0_, w1_, w2_ = om[c, 0], om[c, 1], om[c, 2]
+        dv0, dv1, dv2 = dli[c, 0], dli[c, 1], dli[c, 2]
+        dw0, dw1, dw2 = dom[c, 0], dom[c, 1], dom[c, 2]
+        b0 = v1 * f2 - v2 * f1
+        b1_ = v2 * f0 - v0 * f2
+        b2_ = v0 * f1 - v1 * f0
+        bb[c, 0], bb[c, 1], bb[c, 2] = b0, b1_, b2_
+        aa[c, 0] = b0 + w1_ * m2 - w2_ * m1
+        aa[c, 1] = b1_ + w2_ * m0 - w0_ * m2
+        aa[c, 2] = b2_ + w0_ * m1 - w1_ * m0
+        e0 = dv1 * f2 - dv2 * f1 + v1 * g2 - v2 * g1
+        e1 = dv2 * f0 - dv0 * f2 + v2 * g0 - v0 * g2
+        e2 = dv0 * f1 - dv1 * f0 + v0 * g1 - v1 * g0
+        db[c, 0], db[c, 1], db[c, 2] = e0, e1, e2
+        da[c, 0] = e0 + dw1 * m2 - dw2 * m1 + w1_ * n2 - w2_ * n1
+        da[c, 1] = e1 + dw2 * m0 - dw0 * m2 + w2_ * n0 - w0_ * n2
+        da[c, 2] = e2 + dw0 * m1 - dw1 * m0 + w0_ * n1 - w1_ * n0
+    return aa, da, bb, db
 
 
-def _hessian_dense(jfree, f6, mask, n):
-    """The (θ, q)-ordered Hessian of Ψ in screw form (the dense kernel's loop, same bits)."""
-    fx, fy, fz, mx, my, mz = f6[0], f6[1], f6[2], f6[3], f6[4], f6[5]
-    d = np.empty((3, n))
-    em = np.empty((3, n))
-    for b in range(n):
-        v0, v1, v2 = jfree[0, b], jfree[1, b], jfree[2, b]
-        w0, w1, w2 = jfree[3, b], jfree[4, b], jfree[5, b]
-        d[0, b] = fz * v1 - fy * v2
-        d[1, b] = -fz * v0 + fx * v2
-        d[2, b] = fy * v0 - fx * v1
-        em[0, b] = mz * w1 - my * w2
-        em[1, b] = -mz * w0 + mx * w2
-        em[2, b] = my * w0 - mx * w1
-    hz = np.empty((n, n))
-    for i in range(n):
-        for j in range(n):
-            if mask[i, j]:
-                hz[i, j] = (jfree[3, j] * d[0, i] + jfree[4, j] * d[1, i] + jfree[5, j] * d[2, i]
-                            + (em[0, i] * jfree[3, j] + em[1, i] * jfree[4, j] + em[2, i] * jfree[5, j]))
-            else:
-                hz[i, j] = jfree[3, i] * d[0, j] + jfree[4, i] * d[1, j] + jfree[5, i] * d[2, j]
-    return hz
+def _rate_lin(dli, dom, w, g, task):
+    """``gᵀ (J' w)`` on the task rows (the second term of ``dμ/ds``)."""
+    jw = np.zeros(6)
+    for c in range(dli.shape[0]):
+        for a3 in range(3):
+            jw[a3] += dli[c, a3] * w[c]
+            jw[3 + a3] += dom[c, a3] * w[c]
+    lin = 0.0
+    for i in range(task.shape[0]):
+        lin += g[i] * jw[task[i]]
+    return lin
 
 
 # --------------------------------------------------------------------------- the iteration
@@ -881,7 +600,7 @@ def _iterate_chain(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, c
     task = ci[6 + n + nt:6 + n + nt + m]
     ip = ci[6 + n + nt + m:6 + n + nt + m + nip]
     ir = ci[6 + n + nt + m + nip:6 + n + nt + m + nip + nir]
-    tol, tol_p, kscale_c, stat_floor, shift, max_step = cf[0], cf[1], cf[2], cf[3], cf[4], cf[5]
+    shift, max_step = cf[4], cf[5]
     follow, polish_step, rank_tol = cf[6] != 0.0, cf[7], cf[8]
     fact_in = fact
     empty = fact_in[3]
@@ -901,68 +620,18 @@ def _iterate_chain(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, c
             for j in range(klo[i], khi[i]):
                 s += kz[i, j] * (x[theta_idx[j]] - theta0[j])
             tau[i] = s
-        hq = _qr_t(jac, m, n)
-        hh[:m + 1, :] = hq
-        rr = np.zeros((m, m))
-        for i in range(m):
-            for j in range(i, m):
-                rr[i, j] = hh[j, i]
-        qt = _apply_qt(hh, tau, m, n)
-        f = np.zeros(m)
-        for i in range(m):
-            if rr[i, i] == 0.0:
-                return _FACTOR_FAIL, 0.0, 0.0, 0.0, 0.0, fact, empty, empty, empty, novec
-        for i in range(m - 1, -1, -1):
-            s = qt[i]
-            for j in range(i + 1, m):
-                s -= rr[i, j] * f[j]
-            f[i] = s / rr[i, i]
-        r = tau.copy()
-        for c in range(n):
-            s = 0.0
-            for i in range(m):
-                s += jac[i, c] * f[i]
-            r[c] -= s
-        f6 = np.zeros(6)
-        for i in range(m):
-            f6[task[i]] = f[i]
-        hz = _hessian_dense(jfree, f6, mask, n) if keep else fact_in[6]
+        hh[:m + 1, :] = _qr_t(jac, m, n)
+        ok, rr, f, r, f6 = _multiplier(jac, hh, tau, task, m, n)
+        if not ok:
+            return _FACTOR_FAIL, 0.0, 0.0, 0.0, 0.0, fact, empty, empty, empty, novec
+        hz = _hessian(jfree, f6, mask, n) if keep else fact_in[6]
         fact = (jac, hh, rr, f, r, tau, hz, f6)
     jac, hh, rr, f, r, tau, hz, f6 = fact
     if hh.shape[0] != m + 7:  # a factorisation by the dense kernel: no Jacobian rows here
         return NEED_DENSE, 0.0, 0.0, 0.0, 0.0, fact_in, empty, empty, empty, novec
     jfree = hh[m + 1:, :]
-    e = np.empty(m)
-    for i in range(m):
-        t_ = task[i]
-        e[i] = cf[9 + t_] - pos[t_] if t_ < 3 else erot[t_ - 3]
-    ep = 0.0
-    for i in ip:
-        ep = max(ep, abs(e[i]))
-    er = 0.0
-    for i in ir:
-        er = max(er, abs(e[i]))
-    rs = 0.0
-    r2 = 0.0
-    taumax = 0.0
-    for c in range(n):
-        rs = max(rs, abs(r[c]))
-        r2 += r[c] * r[c]
-        taumax = max(taumax, abs(tau[c]))
-    es2 = 0.0
-    for i in range(m):
-        es2 += (e[i] / escale[i]) ** 2
-    kkt = math.sqrt(es2) + math.sqrt(r2) / kscale_c
-    converged = ep <= 0.01 * tol_p and er <= 0.01 * tol and rs <= tol * max(taumax, stat_floor)
-    # chain order: Jacobian columns, task rows
-    jz = np.empty((6, n))
-    for c in range(n):
-        for a_ in range(6):
-            jz[a_, c] = jfree[a_, order[c]]
-    cb = np.empty((m, n))
-    for i in range(m):
-        for c in range(n):
-            cb[i, c] = jz[task[i], c]
+    e, ep, er, rs, kkt, converged = _progress(pos, erot, ip, ir, task, cf, escale, r, tau)
+    jz, cb = _gather(jfree, order, task)  # chain order: Jacobian columns, task rows
     if not converged or polish_left:
         wd, wu, wv, wp, wq = _w_gens(jz, f6, starts, kd, False)
         bst, bd, bu, bv, bp, bq, s_, rho = _bordered(wd, wu, wv, wp, wq, starts, dpos, kp, cb)
@@ -998,7 +667,7 @@ def _iterate_chain(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, c
             if not smax <= max_step:
                 return _STEP_FAIL, kkt, ep, er, rs, fact if keep else fact_in, empty, empty, empty, novec
             return (_CONTINUE, kkt, ep, er, rs, fact if keep else fact_in, dx if keep else empty,
-                    _moved(x, free, dx, flush), empty, novec)
+                    _moved_loops(x, free, dx, flush), empty, novec)
         finite = True
         smax = 0.0
         for c in range(n):
@@ -1007,15 +676,8 @@ def _iterate_chain(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, c
             smax = max(smax, abs(dx[c] / vscale[c]))
         if finite and smax > polish_step:
             return (_POLISH, kkt, ep, er, rs, fact if keep else fact_in, dx if keep else empty,
-                    _moved(x, free, dx, flush), empty, novec)
-    ru = np.zeros((m, m))
-    for i in range(m):
-        for j in range(i, m):
-            if not math.isfinite(rr[i, j]):
-                return _RANK_FAIL, kkt, ep, er, rs, fact if keep else fact_in, empty, empty, empty, novec
-            ru[i, j] = rr[i, j]
-    sv_ = np.linalg.svd(ru)[1]
-    if not sv_[m - 1] > rank_tol * sv_[0]:
+                    _moved_loops(x, free, dx, flush), empty, novec)
+    if not _full_rank(rr, m, rank_tol):
         return _RANK_FAIL, kkt, ep, er, rs, fact if keep else fact_in, empty, empty, empty, novec
     ok, lam1, vec = _smallest(starts, dpos, kp, jz, f6, kd, cb, kscale, has_guess, gvec, VEC_TOL_VERDICT)
     if not ok:
@@ -1023,7 +685,7 @@ def _iterate_chain(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, c
     ev = np.empty(1)
     ev[0] = -lam1
     if refactor and not keep:
-        fact = (jac, hh, rr, f, r, tau, _hessian_dense(jfree, f6, mask, n), f6)
+        fact = (jac, hh, rr, f, r, tau, _hessian(jfree, f6, mask, n), f6)
     return _CONVERGED, kkt, ep, er, rs, fact, empty, empty, ev, vec
 
 
@@ -1041,14 +703,7 @@ def _point_chain(J6, cols, order, task, dt, prow, starts, dpos, kd, kp, kscale, 
     novec = np.zeros(0)
     if m < 2 or m > n:
         return NEED_DENSE, nan, xd, fd, nan, nan, novec
-    jz = np.empty((6, n))
-    for c in range(n):
-        for a_ in range(6):
-            jz[a_, c] = J6[a_, cols[c]]
-    cb = np.empty((m, n))
-    for i in range(m):
-        for c in range(n):
-            cb[i, c] = jz[task[i], c]
+    jz, cb = _gather(J6, cols, task)
     # rank test of J (FAST_RANK) and its QR for the multiplier g
     hh = _qr_t(cb, m, n)
     rmat = np.zeros((m, m))
@@ -1102,21 +757,11 @@ def _point_chain(J6, cols, order, task, dt, prow, starts, dpos, kd, kp, kscale, 
     for c in range(n):
         resv[c] = -(wsw[c, 0] - lam1 * w[c])  # sym(H − K) w − μ w
     yr = _apply_qt(hh, resv, m, n)
-    g = np.zeros(m)
-    for i in range(m - 1, -1, -1):
-        s = yr[i]
-        for j in range(i + 1, m):
-            s -= rmat[i, j] * g[j]
-        g[i] = s / rmat[i, i]
+    g = _back_substitute(rmat, yr, m)
     xc = np.empty(n)
     for c in range(n):
         xc[c] = xs[c, 0]
-    om = np.empty((n, 3))
-    li = np.empty((n, 3))
-    for c in range(n):
-        for a3 in range(3):
-            li[c, a3] = jz[a3, c]
-            om[c, a3] = jz[3 + a3, c]
+    li, om = _twists(jz)
     dom = np.empty((n, 3))
     dli = np.empty((n, 3))
     # Ω_i = Σ_{j≤i} δx_j ω_j (prefix), P_i = Σ_{j>i} δx_j v_j (suffix)
@@ -1139,34 +784,7 @@ def _point_chain(J6, cols, order, task, dt, prow, starts, dpos, kd, kp, kscale, 
         p0 += xc[i] * li[i, 0]
         p1 += xc[i] * li[i, 1]
         p2 += xc[i] * li[i, 2]
-    wdot = np.zeros(6)
-    for i in range(m):
-        wdot[task[i]] = fd[i]
-    f0, f1, f2, m0, m1, m2 = wrench[0], wrench[1], wrench[2], wrench[3], wrench[4], wrench[5]
-    g0, g1, g2, n0, n1, n2 = wdot[0], wdot[1], wdot[2], wdot[3], wdot[4], wdot[5]
-    aa = np.empty((n, 3))
-    da = np.empty((n, 3))
-    bb = np.empty((n, 3))
-    db = np.empty((n, 3))
-    for c in range(n):
-        v0, v1, v2 = li[c, 0], li[c, 1], li[c, 2]
-        w0_, w1_, w2_ = om[c, 0], om[c, 1], om[c, 2]
-        dv0, dv1, dv2 = dli[c, 0], dli[c, 1], dli[c, 2]
-        dw0, dw1, dw2 = dom[c, 0], dom[c, 1], dom[c, 2]
-        b0 = v1 * f2 - v2 * f1
-        b1_ = v2 * f0 - v0 * f2
-        b2_ = v0 * f1 - v1 * f0
-        bb[c, 0], bb[c, 1], bb[c, 2] = b0, b1_, b2_
-        aa[c, 0] = b0 + w1_ * m2 - w2_ * m1
-        aa[c, 1] = b1_ + w2_ * m0 - w0_ * m2
-        aa[c, 2] = b2_ + w0_ * m1 - w1_ * m0
-        e0 = dv1 * f2 - dv2 * f1 + v1 * g2 - v2 * g1
-        e1 = dv2 * f0 - dv0 * f2 + v2 * g0 - v0 * g2
-        e2 = dv0 * f1 - dv1 * f0 + v0 * g1 - v1 * g0
-        db[c, 0], db[c, 1], db[c, 2] = e0, e1, e2
-        da[c, 0] = e0 + dw1 * m2 - dw2 * m1 + w1_ * n2 - w2_ * n1
-        da[c, 1] = e1 + dw2 * m0 - dw0 * m2 + w2_ * n0 - w0_ * n2
-        da[c, 2] = e2 + dw0 * m1 - dw1 * m0 + w0_ * n1 - w1_ * n0
+    aa, da, bb, db = _rate_terms(li, om, dli, dom, wrench, fd, task)
     # quad = Σ_i w_i [Σ_{j≤i} (dom_j·aa_i + om_j·da_i) w_j + Σ_{j>i} (dom_i·bb_j + om_i·db_j) w_j]
     quad = 0.0
     s1 = np.zeros(3)
@@ -1185,22 +803,20 @@ def _point_chain(J6, cols, order, task, dt, prow, starts, dpos, kd, kp, kscale, 
         for a3 in range(3):
             t1[a3] += w[i] * bb[i, a3]
             t2[a3] += w[i] * db[i, a3]
-    jw = np.zeros(6)
-    for c in range(n):
-        for a3 in range(3):
-            jw[a3] += dli[c, a3] * w[c]
-            jw[3 + a3] += dom[c, a3] * w[c]
-    lin = 0.0
-    for i in range(m):
-        lin += g[i] * jw[task[i]]
-    return 0, k, xd, fd, mu, quad - 2.0 * lin, w
+    return 0, k, xd, fd, mu, quad - 2.0 * _rate_lin(dli, dom, w, g, task), w
 
 
 # =========================================================================== loading, layout
 _COMPILED: list = []  # [(iterate, point)] once loaded, [None] when numba is unavailable
-_HELPERS = ("_w_gens", "_bordered", "_inertia_small", "_factor", "_solve", "_matvec", "_shifted", "_raw_solve",
-            "_kkt_solve", "_count", "_project", "_rayleigh", "_inverse", "_split", "_smallest", "_qr_t",
-            "_apply_qt", "_moved", "_hessian_dense")
+_HELPERS = ("_w_gens", "_bordered", "_factor", "_shifted", "_raw_solve", "_kkt_solve", "_count", "_project",
+            "_rayleigh", "_inverse", "_split", "_smallest", "_gather", "_twists", "_rate_terms", "_rate_lin")
+#: The ones :func:`vjm_pin.analysis.point_kernel._point_loops` calls too.
+RATE_HELPERS = ("_back_substitute", "_twists", "_rate_terms", "_rate_lin")
+#: The dense kernel's helpers (vjm_pin.solver.kernel) this kernel calls, compiled there once (the block
+#: elimination loops are chain_algebra's, compiled by its ``_kernels``). numba's on-disk cache is
+#: invalidated by changes to this file only: after editing those, clear ``__pycache__``.
+_DENSE_HELPERS = ("_qr_t", "_apply_qt", "_back_substitute", "_multiplier", "_hessian", "_progress", "_full_rank",
+                  "_moved_loops")
 
 
 def _load():
@@ -1212,8 +828,15 @@ def _load():
     except Exception:  # noqa: BLE001 - any import failure: the dense kernels stay in use
         _COMPILED.append(None)
         return None
+    if not _kernel._load_compiled() or _algebra._kernels() is None:
+        _COMPILED.append(None)
+        return None
     opts = {"cache": True, "nogil": True}
     g = globals()
+    for name in _DENSE_HELPERS:
+        g[name] = getattr(_kernel, name)
+    g["_factor_loops"], g["_solve"], g["_matvec"] = _algebra._kernels()
+    g["_inertia_small"] = _algebra._inertia_small  # compiled by _kernels (tests call it here)
     for name in _HELPERS:
         g[name] = numba.njit(**opts)(g[name])
     _COMPILED.append((numba.njit(**opts)(_iterate_chain), numba.njit(**opts)(_point_chain)))

@@ -266,7 +266,7 @@ def _iterate_loops(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, c
     task = ci[6 + n + nt:6 + n + nt + m]
     ip = ci[6 + n + nt + m:6 + n + nt + m + nip]
     ir = ci[6 + n + nt + m + nip:6 + n + nt + m + nip + nir]
-    tol, tol_p, kscale, stat_floor, shift, max_step = cf[0], cf[1], cf[2], cf[3], cf[4], cf[5]
+    shift, max_step = cf[4], cf[5]
     follow, polish_step, rank_tol = cf[6] != 0.0, cf[7], cf[8]
     nz = n - m
     # unused result slots hold input arrays (no new array to box: numba boxes a new array
@@ -287,104 +287,14 @@ def _iterate_loops(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, c
             for j in range(nt):
                 s += kz[i, j] * (x[theta_idx[j]] - theta0[j])
             tau[i] = s
-        # Householder QR of Jᵀ (n × m), dgeqr2 / dlarfg: row k of ``hh`` is column k of Jᵀ, then
-        # the reflector v_k (v_k[k] = 1 implicit, entries < k unused); hh[m, k] = τ_k
-        hh = np.zeros((m + 1, n))
-        hh[:m, :] = jac
-        for k in range(m):
-            alpha = hh[k, k]
-            xn2 = 0.0
-            for i in range(k + 1, n):
-                xn2 += hh[k, i] * hh[k, i]
-            xnorm = math.sqrt(xn2)
-            if xnorm == 0.0:
-                hh[m, k] = 0.0
-            else:
-                beta = -math.copysign(math.hypot(alpha, xnorm), alpha)
-                t = (beta - alpha) / beta
-                hh[m, k] = t
-                scal = 1.0 / (alpha - beta)
-                for i in range(k + 1, n):
-                    hh[k, i] *= scal
-                hh[k, k] = beta
-                for j in range(k + 1, m):  # apply H_k to the remaining columns of Jᵀ
-                    s = hh[j, k]
-                    for i in range(k + 1, n):
-                        s += hh[j, i] * hh[k, i]
-                    s *= t
-                    hh[j, k] -= s
-                    for i in range(k + 1, n):
-                        hh[j, i] -= s * hh[k, i]
-        rr = np.zeros((m, m))
-        for i in range(m):
-            for j in range(i, m):
-                rr[i, j] = hh[j, i]
-        # multiplier: R F = Yᵀ ∇E = (Qᵀ ∇E)[:m]
-        qt = _apply_qt(hh, tau, m, n)
-        f = np.zeros(m)
-        for i in range(m):
-            if rr[i, i] == 0.0:
-                return FACTOR_FAIL, 0.0, 0.0, 0.0, 0.0, fact, empty, empty, empty
-        for i in range(m - 1, -1, -1):
-            s = qt[i]
-            for j in range(i + 1, m):
-                s -= rr[i, j] * f[j]
-            f[i] = s / rr[i, i]
-        r = tau.copy()
-        for c in range(n):
-            s = 0.0
-            for i in range(m):
-                s += jac[i, c] * f[i]
-            r[c] -= s
-        f6 = np.zeros(6)
-        for i in range(m):
-            f6[task[i]] = f[i]
-        # Hessian of Ψ in screw form (kinematics/screw.py)
-        fx, fy, fz, mx, my, mz = f6[0], f6[1], f6[2], f6[3], f6[4], f6[5]
-        d = np.empty((3, n))
-        em = np.empty((3, n))
-        for b in range(n):
-            v0, v1, v2 = jfree[0, b], jfree[1, b], jfree[2, b]
-            w0, w1, w2 = jfree[3, b], jfree[4, b], jfree[5, b]
-            d[0, b] = fz * v1 - fy * v2
-            d[1, b] = -fz * v0 + fx * v2
-            d[2, b] = fy * v0 - fx * v1
-            em[0, b] = mz * w1 - my * w2
-            em[1, b] = -mz * w0 + mx * w2
-            em[2, b] = my * w0 - mx * w1
-        hz = np.empty((n, n))
-        for i in range(n):
-            for j in range(n):
-                if mask[i, j]:
-                    hz[i, j] = (jfree[3, j] * d[0, i] + jfree[4, j] * d[1, i] + jfree[5, j] * d[2, i]
-                                + (em[0, i] * jfree[3, j] + em[1, i] * jfree[4, j] + em[2, i] * jfree[5, j]))
-                else:
-                    hz[i, j] = jfree[3, i] * d[0, j] + jfree[4, i] * d[1, j] + jfree[5, i] * d[2, j]
+        hh = _qr_t(jac, m, n)
+        ok, rr, f, r, f6 = _multiplier(jac, hh, tau, task, m, n)
+        if not ok:
+            return FACTOR_FAIL, 0.0, 0.0, 0.0, 0.0, fact, empty, empty, empty
+        hz = _hessian(jfree, f6, mask, n)
         fact = (jac, hh, rr, f, r, tau, hz, f6)
     jac, hh, rr, f, r, tau, hz, f6 = fact
-    # task error and convergence quantities
-    e = np.empty(m)
-    for i in range(m):
-        t_ = task[i]
-        e[i] = cf[9 + t_] - pos[t_] if t_ < 3 else erot[t_ - 3]
-    ep = 0.0
-    for i in ip:
-        ep = max(ep, abs(e[i]))
-    er = 0.0
-    for i in ir:
-        er = max(er, abs(e[i]))
-    rs = 0.0
-    r2 = 0.0
-    taumax = 0.0
-    for c in range(n):
-        rs = max(rs, abs(r[c]))
-        r2 += r[c] * r[c]
-        taumax = max(taumax, abs(tau[c]))
-    es2 = 0.0
-    for i in range(m):
-        es2 += (e[i] / escale[i]) ** 2
-    kkt = math.sqrt(es2) + math.sqrt(r2) / kscale
-    converged = ep <= 0.01 * tol_p and er <= 0.01 * tol and rs <= tol * max(taumax, stat_floor)
+    e, ep, er, rs, kkt, converged = _progress(pos, erot, ip, ir, task, cf, escale, r, tau)
     # Qᵀ W Q, W = K − H: its trailing block is ZᵀWZ, its block [m:, :m] is ZᵀWY. Both sides as
     # left applications of the reflectors (row operations: contiguous, vectorisable loops):
     # A = Qᵀ W, then Qᵀ Aᵀ = (Qᵀ W Q)ᵀ
@@ -431,14 +341,7 @@ def _iterate_loops(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, c
                 smax = max(smax, abs(dx[c] / vscale[c]))
             if finite and smax > polish_step:
                 return POLISH, kkt, ep, er, rs, fact if keep else fact_in, dx if keep else empty, _moved_loops(x, free, dx, flush), empty
-    ru = np.zeros((m, m))
-    for i in range(m):
-        for j in range(i, m):
-            if not math.isfinite(rr[i, j]):
-                return RANK_FAIL, kkt, ep, er, rs, fact if keep else fact_in, empty, empty, empty
-            ru[i, j] = rr[i, j]
-    sv = np.linalg.svd(ru)[1]
-    if not sv[m - 1] > rank_tol * sv[0]:
+    if not _full_rank(rr, m, rank_tol):
         return RANK_FAIL, kkt, ep, er, rs, fact if keep else fact_in, empty, empty, empty
     sym = np.empty((nz, nz))
     for i in range(nz):
@@ -449,6 +352,139 @@ def _iterate_loops(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, c
             sym[i, j] = v
     ev = np.linalg.eigvalsh(sym)
     return CONVERGED, kkt, ep, er, rs, fact, empty, empty, ev
+
+
+def _qr_t(jac, m, n):
+    """Householder QR of ``Jᵀ`` (n × m), dgeqr2 / dlarfg: row k of ``hh`` is column k of ``Jᵀ``,
+    then the reflector ``v_k`` (``v_k[k] = 1`` implicit, entries < k unused); ``hh[m, k] = τ_k``."""
+    hh = np.zeros((m + 1, n))
+    hh[:m, :] = jac
+    for k in range(m):
+        alpha = hh[k, k]
+        xn2 = 0.0
+        for i in range(k + 1, n):
+            xn2 += hh[k, i] * hh[k, i]
+        xnorm = math.sqrt(xn2)
+        if xnorm == 0.0:
+            hh[m, k] = 0.0
+        else:
+            beta = -math.copysign(math.hypot(alpha, xnorm), alpha)
+            t = (beta - alpha) / beta
+            hh[m, k] = t
+            scal = 1.0 / (alpha - beta)
+            for i in range(k + 1, n):
+                hh[k, i] *= scal
+            hh[k, k] = beta
+            for j in range(k + 1, m):  # apply H_k to the remaining columns of Jᵀ
+                s = hh[j, k]
+                for i in range(k + 1, n):
+                    s += hh[j, i] * hh[k, i]
+                s *= t
+                hh[j, k] -= s
+                for i in range(k + 1, n):
+                    hh[j, i] -= s * hh[k, i]
+    return hh
+
+
+def _multiplier(jac, hh, tau, task, m, n):
+    """The multiplier ``F`` of ``R F = Yᵀ ∇E = (Qᵀ ∇E)[:m]``, the residual ``r = ∇E − Jᵀ F`` and
+    ``F`` in the six wrench slots: ``(ok, R, F, r, F6)``; not ok where ``R`` has a zero pivot."""
+    rr = np.zeros((m, m))
+    for i in range(m):
+        for j in range(i, m):
+            rr[i, j] = hh[j, i]
+    for i in range(m):
+        if rr[i, i] == 0.0:
+            return False, rr, np.zeros(m), tau, np.zeros(m)
+    f = _back_substitute(rr, _apply_qt(hh, tau, m, n), m)
+    r = tau.copy()
+    for c in range(n):
+        s = 0.0
+        for i in range(m):
+            s += jac[i, c] * f[i]
+        r[c] -= s
+    f6 = np.zeros(6)
+    for i in range(m):
+        f6[task[i]] = f[i]
+    return True, rr, f, r, f6
+
+
+def _back_substitute(rr, y, m):
+    """``x`` of ``R x = y[:m]`` (``R`` upper triangular, m × m)."""
+    x = np.zeros(m)
+    for i in range(m - 1, -1, -1):
+        s = y[i]
+        for j in range(i + 1, m):
+            s -= rr[i, j] * x[j]
+        x[i] = s / rr[i, i]
+    return x
+
+
+def _hessian(jfree, f6, mask, n):
+    """The (θ, q)-ordered Hessian of Ψ in screw form (kinematics/screw.py)."""
+    fx, fy, fz, mx, my, mz = f6[0], f6[1], f6[2], f6[3], f6[4], f6[5]
+    d = np.empty((3, n))
+    em = np.empty((3, n))
+    for b in range(n):
+        v0, v1, v2 = jfree[0, b], jfree[1, b], jfree[2, b]
+        w0, w1, w2 = jfree[3, b], jfree[4, b], jfree[5, b]
+        d[0, b] = fz * v1 - fy * v2
+        d[1, b] = -fz * v0 + fx * v2
+        d[2, b] = fy * v0 - fx * v1
+        em[0, b] = mz * w1 - my * w2
+        em[1, b] = -mz * w0 + mx * w2
+        em[2, b] = my * w0 - mx * w1
+    hz = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            if mask[i, j]:
+                hz[i, j] = (jfree[3, j] * d[0, i] + jfree[4, j] * d[1, i] + jfree[5, j] * d[2, i]
+                            + (em[0, i] * jfree[3, j] + em[1, i] * jfree[4, j] + em[2, i] * jfree[5, j]))
+            else:
+                hz[i, j] = jfree[3, i] * d[0, j] + jfree[4, i] * d[1, j] + jfree[5, i] * d[2, j]
+    return hz
+
+
+def _progress(pos, erot, ip, ir, task, cf, escale, r, tau):
+    """Task error and convergence quantities: ``(e, ep, er, rs, kkt, converged)``."""
+    m = task.shape[0]
+    n = r.shape[0]
+    tol, tol_p, kscale, stat_floor = cf[0], cf[1], cf[2], cf[3]
+    e = np.empty(m)
+    for i in range(m):
+        t_ = task[i]
+        e[i] = cf[9 + t_] - pos[t_] if t_ < 3 else erot[t_ - 3]
+    ep = 0.0
+    for i in ip:
+        ep = max(ep, abs(e[i]))
+    er = 0.0
+    for i in ir:
+        er = max(er, abs(e[i]))
+    rs = 0.0
+    r2 = 0.0
+    taumax = 0.0
+    for c in range(n):
+        rs = max(rs, abs(r[c]))
+        r2 += r[c] * r[c]
+        taumax = max(taumax, abs(tau[c]))
+    es2 = 0.0
+    for i in range(m):
+        es2 += (e[i] / escale[i]) ** 2
+    kkt = math.sqrt(es2) + math.sqrt(r2) / kscale
+    converged = ep <= 0.01 * tol_p and er <= 0.01 * tol and rs <= tol * max(taumax, stat_floor)
+    return e, ep, er, rs, kkt, converged
+
+
+def _full_rank(rr, m, rank_tol):
+    """The rank test of ``J`` on ``R``: finite, and ``σ_min > rank_tol · σ_max``."""
+    ru = np.zeros((m, m))
+    for i in range(m):
+        for j in range(i, m):
+            if not math.isfinite(rr[i, j]):
+                return False
+            ru[i, j] = rr[i, j]
+    sv = np.linalg.svd(ru)[1]
+    return sv[m - 1] > rank_tol * sv[0]
 
 
 def _reflect_rows(hh, a, m, n):
@@ -540,12 +576,7 @@ def _step_loops(wq, hh, rr, e, r, n, m):
                 for j in range(k + 1, nz):
                     lu[i, j] -= lik * lu[k, j]
                 rhs[i] -= lik * rhs[k]
-    pz = np.zeros(nz)
-    for i in range(nz - 1, -1, -1):
-        s = rhs[i]
-        for j in range(i + 1, nz):
-            s -= lu[i, j] * pz[j]
-        pz[i] = s / lu[i, i]
+    pz = _back_substitute(lu, rhs, nz)
     # δx = Q [p_Y; −p_Z] = H_0 … H_{m−1} [p_Y; −p_Z]
     dx = np.empty(n)
     for i in range(m):
@@ -606,6 +637,10 @@ def _iterate_into(J6, pos, erot, x, refactor, polish_left, flush, fact, ci, cf, 
     return status, kkt, ep, er, rs
 
 
+#: The njit helpers of :func:`_iterate_loops`, compiled (in this order) by :func:`_load_compiled`;
+#: the chain kernel (:mod:`vjm_pin.solver.chain_kernel`) calls the same ones.
+_HELPERS = ("_apply_qt", "_qr_t", "_back_substitute", "_multiplier", "_hessian", "_progress", "_full_rank", "_reflect_rows",
+            "_step_loops", "_moved_loops")
 _lean = None  # the compiled _iterate_into once built, False when numba is unavailable
 
 
@@ -648,7 +683,7 @@ def _load_compiled():
             return _compiled
         opts = {"cache": True, "nogil": True}
         g = globals()
-        for name in ("_reflect_rows", "_apply_qt", "_step_loops", "_moved_loops"):
+        for name in _HELPERS:
             g[name] = numba.njit(**opts)(g[name])
         fn = numba.njit(**opts)(_iterate_loops)
         # long chains: O(n) algebra (chain_kernel), this kernel where it is unsure
