@@ -182,3 +182,17 @@ def test_solver_results_with_and_without_screw_form_agree(monkeypatch):
     a, b = _solve_both(monkeypatch, lambda: EquilibriumSolver(ch).solve_wrench(w))
     assert a.converged and b.converged and a.stable == b.stable
     assert np.abs(a.x - b.x).max() < 1e-12 and rel(a.deflection, b.deflection) < 1e-12
+
+
+def test_screw_applicable_is_remembered_per_model_and_sees_a_new_joint():
+    """The answer is kept per model object; a joint added to that model afterwards (a spherical
+    one here) is seen, and another model is never given the first one's answer."""
+    model = pin.Model()
+    jid = model.addJoint(0, pin.JointModelRZ(), pin.SE3.Identity(), "rz")
+    assert screw_applicable(model) and screw_applicable(model)
+    model.addJoint(jid, pin.JointModelSpherical(), pin.SE3.Identity(), "ball")
+    assert not screw_applicable(model)
+    other = pin.Model()
+    other.addJoint(0, pin.JointModelPX(), pin.SE3.Identity(), "px")
+    assert screw_applicable(other)
+    assert not screw_applicable(pin.buildSampleModelHumanoidRandom())

@@ -42,15 +42,26 @@ _REVOLUTE = ("JointModelRX", "JointModelRY", "JointModelRZ", "JointModelRevolute
 _PRISMATIC = ("JointModelPX", "JointModelPY", "JointModelPZ", "JointModelPrismaticUnaligned")
 
 
+#: Answers of :func:`screw_applicable` by model (the model kept with its answer, so an id is never
+#: reused while its entry lives; a few entries: one per model a process works with).
+_APPLICABLE: dict[int, tuple[pin.Model, int, bool]] = {}
+
+
 def screw_applicable(model: pin.Model) -> bool:
     """True when every joint of ``model`` is a 1-DoF revolute or prismatic joint (nq = nv), the
-    case where :func:`psi_hessian_screw` equals the contraction of Pinocchio's kinematic Hessian."""
-    if model.nq != model.nv:
-        return False
-    for jm in list(model.joints)[1:]:
-        if jm.shortname() not in _REVOLUTE + _PRISMATIC:
-            return False
-    return True
+    case where :func:`psi_hessian_screw` equals the contraction of Pinocchio's kinematic Hessian.
+    Remembered per model object (reading the joint types copies every joint model: ~2 ms at 148
+    joints, paid by every new solver otherwise)."""
+    hit = _APPLICABLE.get(id(model))
+    if hit is not None and hit[0] is model and hit[1] == model.njoints:  # a joint added since: asked again
+        return hit[2]
+    ok = model.nq == model.nv and all(
+        jm.shortname() in _REVOLUTE + _PRISMATIC for jm in list(model.joints)[1:]
+    )
+    if len(_APPLICABLE) >= 16:
+        _APPLICABLE.pop(next(iter(_APPLICABLE)))
+    _APPLICABLE[id(model)] = (model, model.njoints, ok)
+    return ok
 
 
 def support_mask(nv: int, cols: np.ndarray | None = None) -> np.ndarray:
