@@ -498,16 +498,24 @@ def load_peer():
     return mod
 
 
-def bench_opensees(k: int = 16, vjm: dict | None = None, repeats: int = 1, vjm_curve: dict | None = None) -> dict:
-    """OpenSees critical force and wall time with ``k`` elements per link, same beam (issue 7's
-    comparison: the same element count as vjm_pin's sub-links, 200 displacement steps). Issue
-    14's like-for-like comparison, each code on its coarsest mesh within 1 % of Euler's load
-    and CPU times interleaved, is :func:`bench_opensees_same_accuracy`."""
+def _opensees_peer():
+    """``scripts/opensees_peer.py`` with OpenSeesPy loaded, or ``{"skipped": why}`` when it is unavailable."""
     try:
         peer = load_peer()
         peer.load_opensees()
     except Exception as e:  # noqa: BLE001 - optional dependency
         return {"skipped": f"OpenSeesPy unavailable: {e}"}
+    return peer
+
+
+def bench_opensees(k: int = 16, vjm: dict | None = None, repeats: int = 1, vjm_curve: dict | None = None) -> dict:
+    """OpenSees critical force and wall time with ``k`` elements per link, same beam (issue 7's
+    comparison: the same element count as vjm_pin's sub-links, 200 displacement steps). Issue
+    14's like-for-like comparison, each code on its coarsest mesh within 1 % of Euler's load
+    and CPU times interleaved, is :func:`bench_opensees_same_accuracy`."""
+    peer = _opensees_peer()
+    if isinstance(peer, dict):
+        return peer
     b = PAPER_BEAM
     walls, cpus, res = [], [], None
     for _ in range(repeats):
@@ -581,11 +589,9 @@ def bench_opensees_same_accuracy(k: int = 8, repeats: int = 3, tol: float = 0.01
     ``trace_curve`` limits itself). Times are CPU seconds (``time.process_time``), min over
     ``repeats`` interleaved runs; wall times are kept too.
     """
-    try:
-        peer = load_peer()
-        peer.load_opensees()
-    except Exception as e:  # noqa: BLE001 - optional dependency
-        return {"skipped": f"OpenSeesPy unavailable: {e}"}
+    peer = _opensees_peer()
+    if isinstance(peer, dict):
+        return peer
     from vjm_pin.analysis.curve import trace_curve
     from vjm_pin.solver.threads import single_blas_thread
 
