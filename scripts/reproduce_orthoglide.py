@@ -38,6 +38,8 @@ from pathlib import Path
 import numpy as np
 
 from vjm_pin.analysis.curve import trace_curve
+from vjm_pin.exceptions import ArgumentError
+from vjm_pin.kinematics.shared import share_data
 from vjm_pin.model.format import load_vjm
 from vjm_pin.solver.mechanism import MechanismSolver
 
@@ -105,11 +107,32 @@ def analyse(source, max_deflection: float, steps: int, loadings=LOADINGS) -> dic
     return out
 
 
+#: The first model of each joint tree loaded in this process: the five work points of a variant
+#: differ only in their reference configuration (and frame placements at round-off), so they share
+#: one ``pin.Data`` (:func:`~vjm_pin.kinematics.shared.share_data`; a new one costs ~1 s at 258
+#: coordinates). Every user recomputes what it reads from its own model: the same numbers.
+_TREES: list = []
+
+
+def _load(source):
+    """:func:`load_vjm`, the model sharing the ``pin.Data`` of an earlier one of its joint tree."""
+    vm = load_vjm(source)
+    for like in _TREES:
+        try:
+            share_data(vm.model, like)
+            break
+        except ArgumentError:  # another joint tree
+            continue
+    else:
+        _TREES.append(vm.model)
+    return vm
+
+
 def _task(source, what, max_deflection: float, steps: int):
     """One task of the pool: ``what`` = "unloaded" → (k_free, k_held), or a (loading, name) of
     :data:`LOADINGS` → its curve row. Returns (result, CPU seconds)."""
     t0 = time.process_time()
-    vm = load_vjm(source)
+    vm = _load(source)
     ms = MechanismSolver(vm)
     out = unloaded(ms) if what == "unloaded" else curve_row(vm, ms, *what, max_deflection, steps)
     return out, time.process_time() - t0

@@ -174,3 +174,85 @@ def test_mechanism_tracer_margin_alone_equals_the_full_evaluation():
         full = tr.evaluate(lin, need_tangent=False)
         alone = tr.evaluate(lin, need_tangent=False, mu_only=True)
         assert alone[0] == pytest.approx(full[0], rel=1e-12, abs=1e-12 * ms.kscale)
+
+
+def test_closure_hessian_added_by_runs_of_columns_is_the_fancy_indexed_sum():
+    """The multiplier Hessian accumulates each closure's block by slices over the contiguous runs
+    of its columns (``_add_block``; ``np.ix_`` beyond three breaks): bit for bit the
+    ``out[np.ix_(cols, cols)] += block`` sum, for the Orthoglide's closures and for column sets of
+    one to many runs."""
+    from vjm_pin.kinematics.closures import _add_block
+
+    vm = _orthoglide_loop()
+    ms = MechanismSolver(vm)
+    rng = np.random.default_rng(5)
+    for _ in range(3):
+        cst = ms.closures.evaluate(_random_x(vm, rng), hessian=True)
+        lam = 1e3 * rng.standard_normal(cst.residual.size)
+        ref = np.zeros((vm.model.nv, vm.model.nv))
+        for cf, lam6 in zip(cst.frames, cst._split(lam)):
+            cols, block = cf.hessian_block(lam6)
+            ref[np.ix_(cols, cols)] += block
+        assert np.array_equal(cst.hessian(lam), ref)
+    for cols in ([3, 4, 5], [0, 1, 5, 6, 9], [0, 2, 4, 6, 8, 10], list(range(7)) + [12, 13]):
+        cols = np.array(cols)
+        out = rng.standard_normal((14, 14))
+        ref = out.copy()
+        block = rng.standard_normal((len(cols), len(cols)))
+        ref[np.ix_(cols, cols)] += block
+        _add_block(out, cols, block)
+        assert np.array_equal(out, ref)
+
+
+def test_row_rank_is_the_rank_of_constraint_rank():
+    """The solver's full-rank shortcut (``row_rank``: no pivoted QR when every row is independent)
+    takes the rank of :func:`constraint_rank` itself, and refuses what it refuses."""
+    from vjm_pin.exceptions import InputError
+    from vjm_pin.kinematics.closures import constraint_rank, row_rank
+
+    rng = np.random.default_rng(8)
+    for m, dep in ((6, 0), (8, 3), (5, 1)):
+        a = rng.standard_normal((m, 12)) * rng.uniform(1e-3, 1e3, (m, 1))
+        for i in range(dep):
+            a[m - 1 - i] = rng.standard_normal(2) @ a[:2]
+        info = constraint_rank(a)
+        assert row_rank(a)[4] == info.rank == m - dep
+        assert np.array_equal(row_rank(a)[2], info.singular_values)
+    with pytest.raises(InputError, match="finite"):
+        row_rank(np.array([[np.inf, 1.0]]))
+
+
+@pytest.mark.parametrize("free", [True, False])
+def test_mechanism_tracer_point_judges_as_the_full_evaluation(free):
+    """A tracer point computes μ, λ and both verdicts when first read: the numbers of
+    :meth:`MechanismTracer.evaluate` on the same linearisation, bit for bit."""
+    from vjm_pin.analysis.mechanism_curve import MechanismTracer
+
+    vm = _orthoglide_loop()
+    ms = MechanismSolver(vm)
+    d = np.array([1.0, -1.0, 1.0, 0.0, 0.0, 0.0]) / np.sqrt(3)
+    tr = MechanismTracer(vm, d, 5e-3, ms, 1e-6, free)
+    eq = tr.solve(1e-3, vm.reference)
+    lin = tr.run.linearize(eq.x, tr.hrows, tr.wdead)
+    mu, lam, run, end, tan, k, z_run = tr.evaluate(lin)
+    p = tr.point(eq, 1e-3, lin)
+    assert p.k == k and np.array_equal(p.tan[0], tan[0])
+    assert p.lam == lam and p.mu == mu
+    assert np.array_equal(p.run.eigenvalues, run.eigenvalues) and np.array_equal(p.z_run, z_run)
+    assert np.array_equal(p.end.eigenvalues, end.eigenvalues) and p.end.stable == end.stable
+
+
+def test_newton_gives_up_beyond_its_radius():
+    """``_newton(radius=...)``: an iterate farther than the radius from the start ends the attempt
+    (not converged, no state); an unreachable radius changes nothing, bit for bit."""
+    vm = resolve_model("four-bar")
+    ms = MechanismSolver(vm)
+    p_t, r_t = ms.p0 + np.array([2e-3, 0.0, 0.0]), ms.r0
+    hrows = [ms.task.index(c) for c in ms.task]
+    x0 = vm.reference.copy()
+    plain = ms._newton(x0, hrows, np.zeros(6), p_t, r_t, 1.0, ms.max_iter)
+    wide = ms._newton(x0, hrows, np.zeros(6), p_t, r_t, 1.0, ms.max_iter, radius=1e9)
+    assert plain[2] and wide[2] and np.array_equal(plain[0], wide[0]) and plain[1] == wide[1]
+    x, it, ok, st = ms._newton(x0, hrows, np.zeros(6), p_t, r_t, 1.0, ms.max_iter, radius=1e-9)
+    assert not ok and st is None and it == 1
+    assert np.abs((x - x0)[ms.free] / ms.var_scale).max() > 1e-9

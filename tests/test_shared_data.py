@@ -198,6 +198,34 @@ def test_data_for_is_per_model_and_dropped_with_the_model():
         data_for("portal-frame")
 
 
+def test_models_of_one_joint_tree_share_a_data_and_give_their_own_numbers():
+    """``share_data``: the Orthoglide at Q1 on the Data of Q0 (one joint tree; the frame placements
+    differ at round-off) solves, judges and stiffens bit for bit as on its own Data, with Q0's
+    solver run on the same Data in between; a model of another tree is refused."""
+    from vjm_pin.kinematics.shared import share_data
+
+    q0, own, shared = _fresh("orthoglide-q0"), _fresh("orthoglide-q1"), _fresh("orthoglide-q1")
+    d = -1e-3 * np.ones(3) / np.sqrt(3)
+
+    def run(vm):
+        solver = MechanismSolver(vm)
+        res = solver.solve(deflection=d, held="x y z")
+        return res, solver.stiffness(res)
+
+    expected = run(own)
+    assert share_data(shared.model, q0.model) is data_for(q0.model)
+    assert data_for(shared.model) is data_for(q0.model) and data_for(own.model) is not data_for(q0.model)
+    first = run(shared)
+    other = run(q0)  # the same Data at Q0's configurations
+    _same(first, expected)
+    _same(run(shared), expected)
+    assert not np.array_equal(other[0].x, expected[0].x)
+    with pytest.raises(ArgumentError, match="joint tree"):
+        share_data(_fresh("four-bar").model, q0.model)
+    with pytest.raises(ArgumentError, match="pinocchio.Model"):
+        share_data("orthoglide-q1", q0.model)
+
+
 @pytest.mark.parametrize("name", ["four-bar", "orthoglide-q0"])
 def test_placements_without_data_equal_pinocchio(name):
     vm = _fresh(name)

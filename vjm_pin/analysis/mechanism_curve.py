@@ -51,6 +51,9 @@ CHORD_MAX_ITER = 12
 #: How far past a bifurcation a marginally stable new branch is checked (× the critical deflection).
 CONFIRM_REL = 0.05
 MAX_CHORD_STEP = 0.05
+#: The plain Newton of a short continuation step gives up beyond this many times the corrector's
+#: bound from the prediction (:meth:`MechanismTracer.step`).
+SHORT_STEP_RADIUS = 10.0
 
 
 def task_axes(task, d: np.ndarray) -> np.ndarray:
@@ -72,9 +75,44 @@ def task_axes(task, d: np.ndarray) -> np.ndarray:
 
 class _MBP(_BP):
     """A branch point of the mechanism tracer: also the two stability verdicts and the
-    linearisation's null space and Hessian (for the branch switch)."""
+    linearisation's null space and Hessian (for the branch switch).
 
-    __slots__ = ("end", "kinv", "lin", "run", "z_run")
+    ``mu``, ``lam``, ``run``, ``z_run`` and ``end`` are computed from ``lin`` when first read
+    (:meth:`MechanismTracer.margin`, :meth:`~MechanismTracer.run_verdict`,
+    :meth:`~MechanismTracer.end_verdict`): the sub-steps of a reach are continued from (their
+    tangent, from :meth:`~MechanismTracer.bordered`, is computed at once) but never judged, and a
+    point off the grid never reports ``end``. The numbers are those of :meth:`MechanismTracer.evaluate`."""
+
+    __slots__ = ("_tr", "_v", "kinv", "lin")
+
+    def __init__(self, s, eq, force, k, tr, lin):
+        self._tr, self._v, self.lin, self.kinv = tr, {}, lin, None
+        super().__init__(s, eq, force, k, None, None, None)
+
+    def _get(self, key):
+        v = self._v
+        if key not in v:
+            tr = self._tr
+            if key == "mu":
+                v["mu"] = tr.margin(self.lin)
+            elif key == "end":
+                v["end"] = tr.end_verdict(self.lin, self.run)
+            else:
+                v["run"], v["z_run"] = tr.run_verdict(self.lin)
+                v.setdefault("lam", _top(v["run"]))
+        return v[key]
+
+    def _set(self, key, value):
+        if value is None:  # (_BP.__init__: not computed yet)
+            self._v.pop(key, None)
+        else:
+            self._v[key] = value
+
+    mu = property(lambda p: p._get("mu"), lambda p, v: p._set("mu", v))
+    lam = property(lambda p: p._get("lam"), lambda p, v: p._set("lam", v))
+    run = property(lambda p: p._get("run"))
+    z_run = property(lambda p: p._get("z_run"))
+    end = property(lambda p: p._get("end"))
 
 
 class MechanismTracer(_Tracer):
@@ -126,22 +164,35 @@ class MechanismTracer(_Tracer):
         """(mu, lam, run verdict, end verdict, tangent or None, k, z_run) from a Linearization;
         ``mu_only``: μ alone (the others None: the margin's derivative and the rigid-start search
         need no more)."""
-        w = lin.hessian
-        c, j = lin.closure_jacobian, lin.task_jacobian
-        rtol = self.run.rank_rtol
-        mu = _top(_verdict(w, _null_basis(np.vstack([c, self.p_rows @ j]), rtol)[0], self.verdict_thr))
+        mu = self.margin(lin)
         if mu_only:
             return mu, None, None, None, None, float("nan"), None
-        z_run, _ = _null_basis(np.vstack([c, self.held6 @ j]), rtol)
-        run = _verdict(w, z_run, self.verdict_thr)
-        if self.held6.shape[0] == self.all6.shape[0]:
-            end = run
-        else:
-            end = _verdict(w, _null_basis(np.vstack([c, self.all6 @ j]), rtol)[0], self.verdict_thr)
+        run, z_run = self.run_verdict(lin)
+        end = self.end_verdict(lin, run)
         tan, k = None, float("nan")
         if need_tangent:
             tan, k = self.bordered(lin)
         return mu, _top(run), run, end, tan, k, z_run
+
+    def margin(self, lin) -> float:
+        """μ: the largest eigenvalue on the null space of ``[C; P J]`` (force control along ``d``)."""
+        c, j = lin.closure_jacobian, lin.task_jacobian
+        z = _null_basis(np.vstack([c, self.p_rows @ j]), self.run.rank_rtol)[0]
+        return _top(_verdict(lin.hessian, z, self.verdict_thr))
+
+    def run_verdict(self, lin):
+        """(verdict for the control as run, ``Z`` of ``[C; H J]``)."""
+        c, j = lin.closure_jacobian, lin.task_jacobian
+        z_run, _ = _null_basis(np.vstack([c, self.held6 @ j]), self.run.rank_rtol)
+        return _verdict(lin.hessian, z_run, self.verdict_thr), z_run
+
+    def end_verdict(self, lin, run):
+        """Eq. (23) with every task component held (``run`` when the run holds them all)."""
+        if self.held6.shape[0] == self.all6.shape[0]:
+            return run
+        c, j = lin.closure_jacobian, lin.task_jacobian
+        z = _null_basis(np.vstack([c, self.all6 @ j]), self.run.rank_rtol)[0]
+        return _verdict(lin.hessian, z, self.verdict_thr)
 
     def bordered(self, lin):
         """(tangent (dx/ds, dw/ds) or None, dF/ds) from eq. 28 bordered with the closure rows."""
@@ -180,9 +231,9 @@ class MechanismTracer(_Tracer):
     def point(self, eq, s: float, lin=None) -> _MBP:
         lin = lin if lin is not None else self.run.linearize(eq.x, self.hrows, self.wdead)
         self._kinv = None
-        mu, lam, run, end, tan, k, z_run = self.evaluate(lin)
-        p = _MBP(s, eq, self.d @ eq.wrench, k, None, mu, lam)
-        p.tan, p.run, p.end, p.lin, p.z_run, p.kinv = tan, run, end, lin, z_run, self._kinv
+        tan, k = self.bordered(lin)
+        p = _MBP(s, eq, self.d @ eq.wrench, k, self, lin)  # μ and the verdicts when first read
+        p.tan, p.kinv = tan, self._kinv
         return p
 
     def _tangent(self, p):  # set by point(); None when the bordered matrix is singular
@@ -273,6 +324,11 @@ class MechanismTracer(_Tracer):
         t = self.tangent(a)
         ds = s - a.s
         x_pred = flush_tiny(a.eq.x + ds * t[0]) if t is not None else a.eq.x.copy()
+        move = self.scaled(x_pred - a.eq.x)
+        if move > 0.1:
+            return None
+        # the corrector must stay this close to the prediction (else a shorter step)
+        bound = 0.25 * move + 1e-9 if t is not None else 1e-2
         lin = None
         if self.partial_rotation:
             eq = self.solve(s, x_pred, self.cont)
@@ -292,21 +348,18 @@ class MechanismTracer(_Tracer):
             else:
                 if abs(ds) > 1e-4 * self.range:
                     return None  # a shorter step first
-                # a short step: the plain Newton with its line search (no continuation)
-                x, it, ok, st = self.cont._newton(x_pred, self.hrows, self.wdead, p_t, r_t, 1.0, self.cont.max_iter)
+                # a short step: the plain Newton with its line search (no continuation), given up
+                # once it strays SHORT_STEP_RADIUS × the bound from the prediction (next to a fold or a
+                # singular point it wanders there for its whole budget, and a solution it reached
+                # that far away would be rejected below)
+                x, it, ok, st = self.cont._newton(x_pred, self.hrows, self.wdead, p_t, r_t, 1.0, self.cont.max_iter,
+                                                  radius=SHORT_STEP_RADIUS * bound)
                 if not ok:
                     return None
                 eq = self.cont._result(x, it, True, self.hrows, self.wdead, p_t, r_t, "continuation",
                                        state=st, verdicts=False)
                 lin = self.cont.linearize(x, self.hrows, self.wdead, state=st)
-        if self.scaled(x_pred - a.eq.x) > 0.1:
-            return None
-        corr = self.scaled(eq.x - x_pred)
-        if t is not None:
-            ok = corr <= 0.25 * self.scaled(x_pred - a.eq.x) + 1e-9
-        else:
-            ok = corr <= 1e-2
-        return self.point(eq, s, lin) if ok else None
+        return self.point(eq, s, lin) if self.scaled(eq.x - x_pred) <= bound else None
 
     def switch(self, u, s: float):
         """The stable branch leaving the bifurcation at ``u``, solved at ``s`` (as the serial

@@ -48,6 +48,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from itertools import pairwise
 
 import numpy as np
 import pinocchio as pin
@@ -257,7 +258,7 @@ class ClosureState:
             if np.any(lam6):
                 if cf.screw:  # on the joints that move the closure's frames only
                     cols, block = cf.hessian_block(lam6)
-                    out[np.ix_(cols, cols)] += block
+                    _add_block(out, cols, block)
                 else:
                     out += cf.hessian(lam6)
         return out
@@ -269,6 +270,21 @@ class ClosureState:
         return {
             cf.closure.name: cf.wrenches(lam6) for cf, lam6 in zip(self.frames, self._split(lam))
         }
+
+
+def _add_block(out: np.ndarray, cols: np.ndarray, block: np.ndarray) -> None:
+    """``out[np.ix_(cols, cols)] += block`` (``cols`` ascending, distinct) by slices over the
+    contiguous runs of ``cols`` (a closure's columns: one or two legs, a few runs): the same
+    additions, without the fancy-indexed copy and write-back."""
+    breaks = np.flatnonzero(np.diff(cols) != 1) + 1
+    if len(breaks) > 3:
+        out[np.ix_(cols, cols)] += block
+        return
+    edges = [0, *breaks.tolist(), len(cols)]
+    runs = [(int(cols[i]), int(cols[j - 1]) + 1, i, j) for i, j in pairwise(edges)]
+    for r0, r1, i0, i1 in runs:
+        for c0, c1, j0, j1 in runs:
+            out[r0:r1, c0:c1] += block[i0:i1, j0:j1]
 
 
 class ClosureSet:
@@ -394,6 +410,30 @@ class ConstraintRank:
         return tuple(self.labels[i] if self.labels else str(i) for i in self.redundant)
 
 
+def row_rank(jacobian: np.ndarray, rtol: float = RANK_RTOL):
+    """The rank test of :func:`constraint_rank` alone (no pivoting: which rows are independent is
+    not decided): ``(a, scaled, singular values, tolerance, rank)``, ``a`` the (m, nv) float
+    array, ``scaled`` its rows normalised (zero rows kept zero). A caller that finds
+    ``rank == m`` knows every row is independent without :func:`constraint_rank`'s QR.
+
+    Raises:
+        InputError: not a finite 2-D array.
+    """
+    a = np.asarray(jacobian, dtype=float)
+    if a.ndim != 2 or not np.all(np.isfinite(a)):
+        raise InputError(f"jacobian must be a finite (rows, nv) array, got shape {a.shape}")
+    m = a.shape[0]
+    norms = np.linalg.norm(a, axis=1)
+    big = float(norms.max()) if m else 0.0
+    nonzero = norms > rtol * big if big > 0 else np.zeros(m, bool)
+    scaled = np.zeros_like(a)
+    scaled[nonzero] = a[nonzero] / norms[nonzero, None]
+    sv = np.linalg.svd(scaled, compute_uv=False) if m and a.shape[1] else np.zeros(0)
+    tol = rtol * float(sv[0]) if sv.size else 0.0
+    rank = int(np.sum(sv > tol)) if sv.size else 0
+    return a, scaled, sv, tol, rank
+
+
 def constraint_rank(
     jacobian: np.ndarray, labels: Sequence[str] | None = None, rtol: float = RANK_RTOL
 ) -> ConstraintRank:
@@ -414,22 +454,12 @@ def constraint_rank(
     """
     from scipy.linalg import qr
 
-    a = np.asarray(jacobian, dtype=float)
-    if a.ndim != 2 or not np.all(np.isfinite(a)):
-        raise InputError(f"jacobian must be a finite (rows, nv) array, got shape {a.shape}")
+    a, scaled, sv, tol, rank = row_rank(jacobian, rtol)
     if labels is not None:
         labels = tuple(labels)
         if len(labels) != a.shape[0]:
             raise InputError(f"labels has {len(labels)} names for {a.shape[0]} rows")
     m = a.shape[0]
-    norms = np.linalg.norm(a, axis=1)
-    big = float(norms.max()) if m else 0.0
-    nonzero = norms > rtol * big if big > 0 else np.zeros(m, bool)
-    scaled = np.zeros_like(a)
-    scaled[nonzero] = a[nonzero] / norms[nonzero, None]
-    sv = np.linalg.svd(scaled, compute_uv=False) if m and a.shape[1] else np.zeros(0)
-    tol = rtol * float(sv[0]) if sv.size else 0.0
-    rank = int(np.sum(sv > tol)) if sv.size else 0
     if rank:
         _, _, piv = qr(scaled.T, mode="economic", pivoting=True)
         independent = tuple(int(i) for i in piv[:rank])
@@ -497,5 +527,6 @@ __all__ = [
     "jlog3",
     "jlog3_derivative",
     "min_norm_multipliers",
+    "row_rank",
     "skew",
 ]

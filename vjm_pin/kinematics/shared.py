@@ -55,7 +55,11 @@ def data_for(model: pin.Model) -> pin.Data:
     hit = cache.get(key)
     if hit is not None and hit[0]() is model:
         return hit[1]
-    data = model.createData()
+    return _remember(cache, key, model, model.createData())
+
+
+def _remember(cache: dict, key: int, model: pin.Model, data: pin.Data) -> pin.Data:
+    """Store ``data`` as ``model``'s shared Data in ``cache`` (this thread's), dropped with the model."""
 
     def _drop(_ref, cache=cache, key=key):
         entry = cache.get(key)
@@ -66,9 +70,37 @@ def data_for(model: pin.Model) -> pin.Data:
     return data
 
 
+def share_data(model: pin.Model, like: pin.Model) -> pin.Data:
+    """Let ``model`` use ``like``'s shared ``pin.Data`` on this thread instead of a new one: for
+    models of one joint tree (the same mechanism loaded at several reference configurations,
+    whose frame placements differ at round-off), where ``createData`` of a large model costs
+    about a second. Safe for the reason the Data is shared at all (module docstring: every user
+    recomputes what it reads, from its own model). Returns the Data.
+
+    Raises:
+        ArgumentError: either is not a ``pinocchio.Model``, or they differ in their joint tree
+            (parents, joint types, sizes, frame count; and Pinocchio's ``model.check(data)``).
+    """
+    if not isinstance(model, pin.Model):
+        raise ArgumentError(f"model must be a pinocchio.Model, got {type(model).__name__}")
+    data = data_for(like)
+    if model is like:
+        return data
+    same = (
+        isinstance(like, pin.Model) and model.nq == like.nq and model.nv == like.nv
+        and model.njoints == like.njoints and model.nframes == like.nframes
+        and list(model.parents) == list(like.parents) and list(model.idx_vs) == list(like.idx_vs)
+        and [j.shortname() for j in model.joints] == [j.shortname() for j in like.joints]
+        and model.check(data)
+    )
+    if not same:
+        raise ArgumentError("share_data needs models of the same joint tree (the Data does not fit the model)")
+    return _remember(_cache(), id(model), model, data)
+
+
 def shared_data_count() -> int:
     """Number of shared Datas alive on this thread (for tests and diagnostics)."""
     return sum(1 for ref, _ in _cache().values() if ref() is not None)
 
 
-__all__ = ["data_for", "shared_data_count"]
+__all__ = ["data_for", "share_data", "shared_data_count"]

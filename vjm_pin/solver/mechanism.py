@@ -70,7 +70,7 @@ import pinocchio as pin
 
 from vjm_pin.exceptions import InputError, NoEquilibrium, SingularStiffness
 from vjm_pin.kinematics.chain import contract_hessian, deflection, displace, pose_error
-from vjm_pin.kinematics.closures import RANK_RTOL, ClosureSet, constraint_rank
+from vjm_pin.kinematics.closures import RANK_RTOL, ClosureSet, constraint_rank, row_rank
 from vjm_pin.kinematics.dead_loads import DeadLoads, Load
 from vjm_pin.kinematics.frames import FrameKinematics
 from vjm_pin.kinematics.screw import psi_hessian_screw, screw_applicable, support_mask
@@ -237,6 +237,7 @@ class _State:
     r: np.ndarray  # stationarity residual
     w6: np.ndarray
     dload: np.ndarray | None  # ∂Q/∂z (free block), hessian=True only
+    hess: np.ndarray | None = None  # W, once :meth:`MechanismSolver._hessian` formed it (read-only)
 
 
 @dataclass(frozen=True)
@@ -575,7 +576,9 @@ class MechanismSolver:
         b = np.concatenate([-cst.residual, e])
         bscale = np.concatenate([self._cscale, np.where(self._axis_translation[np.asarray(hrows, int)], self.length_scale, 1.0)])
         k = a.shape[0]
-        if k:
+        if k and row_rank(a, self.rank_rtol)[4] == k:  # full row rank: every row independent
+            indep, redundant = np.arange(k), ()
+        elif k:
             info = constraint_rank(a, rtol=self.rank_rtol)
             indep = np.array(sorted(info.independent), int)
             redundant = info.redundant
@@ -609,7 +612,10 @@ class MechanismSolver:
         return _State(end, cst, grad, tau, qload, a, b, bscale, indep, redundant, y, z, rr, nu, nu_i, r, w6, dload)
 
     def _hessian(self, s: _State) -> np.ndarray:
-        """``W = K − ∂Q/∂z − H(w) − Σ μ_k ∂²c_k/∂z²`` (free block)."""
+        """``W = K − ∂Q/∂z − H(w) − Σ μ_k ∂²c_k/∂z²`` (free block); formed once per state (the
+        Newton iteration's, then the linearisation and the verdicts at its converged point)."""
+        if s.hess is not None:
+            return s.hess
         free = self.free
         nc = s.cstate.residual.size
         if s.end.hessian is None:  # screw form (self._screw), on the joints that move the task frame
@@ -622,12 +628,17 @@ class MechanismSolver:
         w = self.kz - s.dload - hend
         if nc:
             w = w - s.cstate.hessian(s.nu[:nc])[np.ix_(free, free)]
+        s.hess = w
         return w
 
     # ----------------------------------------------------------------- Newton
-    def _newton(self, x, hrows, w_dead, p_t, r_t, factor, max_iter, local=False, stall=0, soc=False):
+    def _newton(self, x, hrows, w_dead, p_t, r_t, factor, max_iter, local=False, stall=0, soc=False,
+                radius=None):
         """Returns (x, iterations, converged, state). ``stall``: give up (not converged) when the
         last ``stall`` descent steps made no progress (:data:`STALL_WINDOW`); 0: never.
+        ``radius``: give up (not converged; state None) at an iterate farther than that from the
+        start (largest free coordinate change, rad, prismatic ones per ``var_scale``): for a
+        caller that accepts only a solution near the start.
         ``soc``: a trial point of the line search that the merit rejects is tried again with the
         second-order correction ``−A_I⁺ b(x + αδx)`` (minimum-norm, the factorisation of the
         iteration: Nocedal & Wright §15.6), which removes the constraint curvature's
@@ -643,7 +654,10 @@ class MechanismSolver:
         s = rho_prev = None
         drops: list[float] = []  # merit decrease of each accepted descent step (stall test)
         kkts: list[float] = []
+        x_start = x.copy() if radius is not None else None
         for it in range(max_iter + 1 + POLISH_ITERATIONS):
+            if it and radius is not None and np.abs((x - x_start)[self.free] / self.var_scale).max() > radius:
+                return x, it, False, None
             s = self._state(x, hrows, w_dead, p_t, r_t, factor, True)
             if not (np.all(np.isfinite(s.nu)) and np.all(np.isfinite(s.r))):
                 return x, it, False, s
