@@ -283,3 +283,104 @@ def test_one_shot_run_does_not_import_numba():
     env = {k: v for k, v in __import__("os").environ.items() if k != "VJM_PIN_JIT"}
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, env=env, check=False)
     assert out.returncode == 0, out.stderr[-2000:]
+
+
+def test_lean_verdict_certificate_agrees_with_the_eigenvalues(compiled):
+    """``_certified_stable`` (Cholesky past ``thr + δ``) certifies only matrices whose computed largest
+    eigenvalue is below ``−thr``, and every one clearly below; undecided near the threshold (the caller
+    then computes the eigenvalues). ``_cond_bound`` bounds ``σ_max/σ_min`` from above (inf when
+    singular or not finite)."""
+    assert kernel.lean() is not None
+    rng = np.random.default_rng(7)
+    thr = 1e-3
+    for nz in (1, 2, 5, 17):
+        for gap in (1e-2, 1e-6, 1e-9, 1e-13, 0.0, -1e-13, -1e-9, -1e-3):
+            qm, _ = np.linalg.qr(rng.standard_normal((nz, nz)))
+            lam = -thr - np.abs(rng.standard_normal(nz)) * 5.0 - gap
+            lam[0] = -thr - gap  # the largest: gap below −thr (above it when negative)
+            sym = np.ascontiguousarray((qm * lam) @ qm.T)
+            sym = 0.5 * (sym + sym.T)
+            ev = kernel.spectrum(sym)
+            cert = kernel._certified_stable(sym, nz, thr)
+            assert cert == kernel._certified_stable.py_func(sym, nz, thr)
+            if cert:
+                assert ev[-1] < -thr
+            if gap >= 1e-6:
+                assert cert
+            if gap <= 0.0:
+                assert not cert
+    for m in (1, 3, 6):
+        for scale in (1.0, 1e-6, 1e-12):
+            rr = np.triu(rng.standard_normal((m, m)))
+            rr[m - 1, m - 1] *= scale
+            sv = np.linalg.svd(rr, compute_uv=False)
+            c = kernel._cond_bound(rr, m)
+            assert sv[0] / sv[-1] <= c * (1 + 1e-12) and c == kernel._cond_bound.py_func(rr, m)
+        sing = np.triu(rng.standard_normal((m, m)))
+        sing[m - 1, m - 1] = 0.0
+        assert kernel._cond_bound(sing, m) == np.inf
+        sing[0, 0] = np.nan
+        assert not 1e-10 * kernel._cond_bound(sing, m) < 0.5
+
+
+@pytest.mark.parametrize("case", ["model-c", "ur5-link-springs", "prismatic-6row"])
+def test_compiled_restoration_matches_the_numpy_one(case, compiled, monkeypatch):
+    """``_restore`` with the compiled step (``kernel._restore_step``) against its numpy loop from
+    configurations pushed off an equilibrium (the escape's starts) and from a far, damped start: the
+    same steps to rounding, the same number of them and the same verdict."""
+    vm = CASES[case]()
+    s = eqmod.EquilibriumSolver(vm)
+    d = np.zeros(6)
+    d[s.task[0]] = -1e-4
+    r = s.solve(d)
+    p_t, r_t = s._target_pose(d * 1.05)
+    rng = np.random.default_rng(3)
+    assert kernel.restorer() is not None
+    for amp in (1e-3, 3e-2, 1.0):
+        x0 = r.x.copy()
+        x0[s.free] += amp * rng.standard_normal(len(s.free))
+        got = {}
+        for jit in ("0", "1"):
+            monkeypatch.setenv("VJM_PIN_JIT", jit)
+            steps = []
+            inner = s.kin.evaluate
+
+            def evaluate(x, hessian=True, inner=inner, steps=steps):
+                steps.append(1)
+                return inner(x, hessian)
+
+            monkeypatch.setattr(s.kin, "evaluate", evaluate)
+            s.kin._last = None
+            x, _st, ok = s._restore(x0.copy(), None, p_t, r_t)
+            monkeypatch.undo()
+            got[jit] = (x, ok, len(steps))
+        (xa, oka, na), (xb, okb, nb) = got["0"], got["1"]
+        assert (oka, na) == (okb, nb)
+        # (rounding, amplified by the conditioning of the damped steps from the far start)
+        assert rel(xb, xa, scale=np.abs(xa).max()) < (1e-12 if amp < 1.0 else 1e-10), amp
+
+
+def test_lu_elimination_is_a_solve_with_dgesv_failures(compiled):
+    """``_lu_eliminate`` (the partially pivoted LU of ``_step_loops`` and ``_restore_step``) then
+    ``_back_substitute`` solve ``A x = b`` as ``numpy.linalg.solve`` does (to rounding), compiled and
+    as plain Python alike (bit for bit); an exactly zero pivot — a zero column, a zero matrix — fails,
+    and a pivot chosen by the largest magnitude solves a matrix whose leading entry is zero."""
+    assert kernel._load_compiled()
+    rng = np.random.default_rng(11)
+    for k in (1, 2, 3, 6, 17):
+        for trial in range(4):
+            a = rng.standard_normal((k, k))
+            if trial == 1 and k > 1:
+                a[0, 0] = 0.0  # (needs the row swap)
+            b = rng.standard_normal(k)
+            want = np.linalg.solve(a, b)
+            outs = []
+            for fn in (kernel._lu_eliminate, kernel._lu_eliminate.py_func):
+                lu, y = a.copy(), b.copy()
+                assert fn(lu, y, k)
+                outs.append(kernel._back_substitute(lu, y, k))
+            assert outs[0].tobytes() == outs[1].tobytes()
+            assert np.allclose(outs[0], want, rtol=1e-9, atol=1e-12 * np.abs(want).max())
+        for bad in (np.zeros((k, k)), np.hstack([rng.standard_normal((k, k - 1)), np.zeros((k, 1))])):
+            for fn in (kernel._lu_eliminate, kernel._lu_eliminate.py_func):
+                assert not fn(bad.copy(), np.ones(k), k)

@@ -92,12 +92,13 @@ import numpy as np
 from vjm_pin.analysis import point_kernel as _pk
 from vjm_pin.analysis.point_kernel import FAST_RANK, PointKernel, _jit_mode, compiled, use_compiled
 from vjm_pin.exceptions import InputError, NoEquilibrium, SingularStiffness
+from vjm_pin.kinematics import chain as _chain
 from vjm_pin.kinematics.chain import displace as _displace
 from vjm_pin.kinematics.chain import flush_tiny
 from vjm_pin.kinematics.dead_loads import Load
 from vjm_pin.model.format import VjmModel
 from vjm_pin.model.task import task_vector
-from vjm_pin.solver.equilibrium import EquilibriumResult, EquilibriumSolver, _frozen
+from vjm_pin.solver.equilibrium import EquilibriumResult, EquilibriumSolver, _built
 from vjm_pin.solver.mechanism import MechanismSolver
 from vjm_pin.solver.stability import (
     RANK_TOL,
@@ -299,6 +300,25 @@ def _complement_rows(vm, d: np.ndarray) -> np.ndarray:
     return u[:, 1:].T.copy()
 
 
+#: :func:`_complement_rows` by the task rows of ``d`` (bytes): a function of them only (the SVD of
+#: one column); bounded, a copy handed out.
+_ROWS: dict = {}
+
+
+def _complement_rows_kept(vm, d: np.ndarray) -> np.ndarray:
+    """:func:`_complement_rows`, remembered per task and direction (the same numbers: one SVD of
+    the same column); a copy of its own for the caller."""
+    dt = np.ascontiguousarray(d[list(vm.task)], dtype=float)
+    key = (dt.shape, dt.tobytes())
+    hit = _ROWS.get(key)
+    if hit is None:
+        hit = _complement_rows(vm, d)
+        if len(_ROWS) >= 32:
+            _ROWS.clear()  # (directions of a map's sweep: rebuilt on demand)
+        _ROWS[key] = hit
+    return hit.copy()
+
+
 def _point(vm, eq: EquilibriumResult, s: float, d: np.ndarray, kin) -> CurvePoint:
     """A :class:`CurvePoint` at the equilibrium ``eq`` (other branches, not followed)."""
     from vjm_pin.solver import blocks_at
@@ -394,6 +414,92 @@ class _BP:
         self.mu, self.lam, self.dmu, self.tan = mu, lam, None, False
         self.hist = None  # (s, tangent) of the point it was continued from (the second-order predictor)
 
+    def below(self, thr: float) -> bool:
+        """``λ < −thr`` (eq. 23 holds with the tracer's threshold ``thr``)."""
+        return self.lam < -thr
+
+    def above(self, thr: float) -> bool:
+        """``λ ≥ −thr`` (eq. 23 lost)."""
+        return self.lam >= -thr
+
+
+class _LateBP(_BP):
+    """A :class:`_BP` of the fused corrector whose eq. (23) verdict "stable" was certified without
+    the eigenvalues (:class:`~vjm_pin.solver.stability.SpectrumLater`, a Cholesky factorisation past
+    the solver's threshold): ``λ`` is computed from that verdict's spectrum when first read (the
+    expression of :meth:`_Tracer._fused_step`: the same number); :meth:`below` and :meth:`above`
+    answer from the certificate while the tracer's threshold is not above the solver's."""
+
+    __slots__ = ("_lv", "_stab")
+
+    def __init__(self, s, eq, force, k, mu, stab):
+        self._stab, self._lv = stab, None
+        super().__init__(s, eq, force, k, None, mu, None)
+
+    def _get_lam(self) -> float:
+        v = self._lv
+        if v is None:
+            ev = self._stab.eigenvalues
+            v = self._lv = float(ev[-1]) if ev.size else -np.inf  # (ascending: _max_eig)
+        return v
+
+    def _set_lam(self, value) -> None:
+        self._lv = value  # (None: computed when first read)
+
+    lam = property(_get_lam, _set_lam)
+
+    def _certified(self, thr: float) -> bool:
+        st = self._stab
+        return self._lv is None and st.stable and st.tolerance >= thr  # every eigenvalue < −tolerance ≤ −thr
+
+    def below(self, thr: float) -> bool:
+        return True if self._certified(thr) else self.lam < -thr
+
+    def above(self, thr: float) -> bool:
+        return False if self._certified(thr) else self.lam >= -thr
+
+
+class _StateBlocks:
+    """:func:`~vjm_pin.solver.blocks.evaluate_blocks` at ``(x, w)`` split in two (a point of a
+    tracer whose Hessian of Ψ is in screw form): the kinematic state (``.state``, as
+    ``evaluate_blocks`` evaluates it) now, the Blocks when first read — any other attribute, or
+    the call ``b()`` — by ``evaluate_blocks`` from that state (the same numbers). Kept Blocks at
+    that ``(x, w)`` (``evaluate_blocks``'s cache) are taken at once. The compiled chain point
+    kernel reads ``state.jacobian`` only: where it decides, no dense Hessian is formed."""
+
+    __slots__ = ("_args", "_b", "state")
+
+    def __init__(self, vm, kin, x, w):
+        from vjm_pin.solver.blocks import evaluate_blocks
+
+        x = np.asarray(x, dtype=float)
+        w = np.asarray(w, dtype=float)
+        last = getattr(kin, "_blocks_last", None)
+        if last is not None and last[0] is vm and last[1] == x.tobytes() + w.tobytes():
+            self._b = evaluate_blocks(vm, kin, x, w)  # kept: returned (or built) as they are
+            self.state = self._b.state
+        else:
+            self._b = None
+            self.state = kin.evaluate(x, hessian=False)  # as evaluate_blocks (screw form)
+        self._args = (vm, kin, x, w)
+
+    def __call__(self):
+        b = self._b
+        if b is None:
+            from vjm_pin.solver.blocks import evaluate_blocks
+
+            vm, kin, x, w = self._args
+            b = self._b = evaluate_blocks(vm, kin, x, w, self.state)
+        return b
+
+    @property
+    def blocks(self):
+        """The Blocks if built by now, else this object (call it for them)."""
+        return self if self._b is None else self._b
+
+    def __getattr__(self, name):
+        return getattr(self(), name)
+
 
 class _Tracer:
     """The followed branch of one curve and its critical points (module docstring)."""
@@ -401,6 +507,8 @@ class _Tracer:
     #: The second-order predictor between grid points (set per instance; off for subclasses
     #: with their own :meth:`step`).
     second_order = False
+    #: The fused step's compiled helpers (set per instance by :meth:`_point_fn`).
+    _fz = None
 
     def __init__(self, vm, d, max_deflection, solver: EquilibriumSolver, refine_tol):
         self.vm, self.d, self.solver = vm, d, solver
@@ -408,14 +516,15 @@ class _Tracer:
         # plain Newton on whichever branch it starts on (shares the solver's pin.Data)
         self.cont = solver._sibling(follow_stable=False, restarts=0, tol=solver.tol)
         self.range = float(max_deflection)
-        self.P = _complement_rows(vm, d)
+        self.P = _complement_rows_kept(vm, d)
         self.free = solver.free
         self.task = np.asarray(vm.task, dtype=int)
         self.var_scale = solver.var_scale
         self.hmin = MIN_STEP * self.range
         self.eps_abs = OFFSET_ABS * self.range
         self.refine_tol = refine_tol
-        self.thr = STABILITY_TOL * (spectral_norm(vm.K_theta) if vm.K_theta.size else 1.0)
+        self.k_norm = spectral_norm(vm.K_theta) if vm.K_theta.size else 1.0  # ‖K_θ‖₂ (1 without springs)
+        self.thr = STABILITY_TOL * self.k_norm
         self.h = self.range
         self.seg_margin = 0.0  # largest −μ on the current stretch of the followed branch
         # the per-point algebra in one pass where it is far from singular (point_kernel)
@@ -433,10 +542,19 @@ class _Tracer:
         self._pargs = None  # the compiled point kernel's constant arguments (_fused_step)
         self._rt = None  # (rotation part of the last target, its target rotation) (_fused_step)
         self._dense_point = False  # the compiled dense point kernel applies (PointKernel.point's dispatch)
+        self._fz = None  # the fused step's compiled helpers once the compiled point kernel is used (_point_fn)
+        self._nq = vm.model.nq
         if self._corr is not None:
             from vjm_pin.solver import chain_kernel
 
             self._dense_point = len(self.free) < getattr(chain_kernel, "POINT_MIN_N", 0)
+        # the compiled point kernel's chain algebra applies (PointKernel.point's dispatch): point()
+        # evaluates the kinematic state first and the Blocks only if asked for (_StateBlocks)
+        self._chain_point = False
+        if self.kernel is not None and self.mask is not None:
+            from vjm_pin.solver import chain_kernel
+
+            self._chain_point = self.kernel.n >= getattr(chain_kernel, "POINT_MIN_N", 1 << 62)
 
     # ------------------------------------------------------------------ evaluation
     def blocks(self, x, w):
@@ -445,16 +563,27 @@ class _Tracer:
         return blocks_at(self.vm, x, w, self.kin)
 
     def point(self, eq: EquilibriumResult, s: float) -> _BP:
-        b = self.blocks(eq.x, eq.wrench)
         fast = None
         if self.kernel is not None:
             if self._fn is None and use_compiled(self._npts):
                 self._fn = compiled()
             self._npts += 1
-            fast = self.kernel.point(b, self.mask, eq.wrench, self._fn)
+            if self._fn is not None and self._chain_point:
+                # the compiled chain kernel reads the frame Jacobian alone: the Blocks (the dense
+                # Hessian of Ψ) are built only if another path asks for them (_StateBlocks)
+                b = _StateBlocks(self.vm, self.kin, eq.x, eq.wrench)
+                fast = self.kernel.point(b, self.mask, eq.wrench, self._fn)
+                b = b.blocks
+            else:
+                b = self.blocks(eq.x, eq.wrench)
+                fast = self.kernel.point(b, self.mask, eq.wrench, self._fn)
+        else:
+            b = self.blocks(eq.x, eq.wrench)
         held = getattr(eq, "stability_end_held", None)  # eq. (23) as the solver found it
         if held is None and getattr(eq, "held", None) is None:
             held = eq.stability  # every task component held: the verdict of eq. (23)
+        if (held is None or fast is None) and type(b) is _StateBlocks:
+            b = b()  # the Blocks themselves (built now)
         lam = _max_eig(held if held is not None else check_stability_held(b, None))
         if fast is not None:
             # k, the tangent of eq. (29) along d and μ in one pass (point_kernel)
@@ -525,22 +654,30 @@ class _Tracer:
         O(δs³): the followed branch between grid points), plain Newton corrector, continuity
         check; None when the corrector strays (or does not converge)."""
         s = float(s)
-        t = self.tangent(a)
+        t = a.tan
+        if t is False:
+            t = self.tangent(a)
         ds = s - a.s
         if t is not None:
-            dx, dw = ds * t[0], ds * t[1]
+            dw = None  # ds·t[1] (+ the second-order term), when the general solve needs it
             h = a.hist if second_order else None
-            if h is not None:
-                # second order: the tangent's change since the point ``a`` was continued from
-                # (a difference quotient of eq. 29's tangent over a step not much shorter than ds)
-                back = a.s - h[0]
-                if abs(back) >= SECOND_ORDER_BACK * abs(ds) and abs(back) >= 1e-6 * self.range:
-                    c = 0.5 * ds * ds / back
-                    dx = dx + c * (t[0] - h[1])
-                    dw = dw + c * (t[1] - h[2])
-            x_pred = flush_tiny(a.eq.x + dx)  # no subnormal coordinates (FLUSH_BELOW)
+            fz = self._fz
+            if h is None and fz is not None:  # x_pred and its scaled move in one compiled call
+                x_pred = np.empty(self._nq)
+                move = fz[0](a.eq.x, t[0], ds, self.free, self.var_scale, _chain._flush_enabled, x_pred)
+            else:
+                dx, dw = ds * t[0], ds * t[1]
+                if h is not None:
+                    # second order: the tangent's change since the point ``a`` was continued from
+                    # (a difference quotient of eq. 29's tangent over a step not much shorter than ds)
+                    back = a.s - h[0]
+                    if abs(back) >= SECOND_ORDER_BACK * abs(ds) and abs(back) >= 1e-6 * self.range:
+                        c = 0.5 * ds * ds / back
+                        dx = dx + c * (t[0] - h[1])
+                        dw = dw + c * (t[1] - h[2])
+                x_pred = flush_tiny(a.eq.x + dx)  # no subnormal coordinates (FLUSH_BELOW)
+                move = self.scaled(x_pred - a.eq.x)
             w_pred = None  # a.eq.wrench + dw, when the general solve needs it
-            move = self.scaled(x_pred - a.eq.x)
             if move > MAX_MOVE:  # checked before the corrector: a rejected prediction costs no solve
                 return None
         else:
@@ -558,7 +695,7 @@ class _Tracer:
             if abs(ds) > 1e-4 * self.range and len(self.vm.task) < len(self.free):
                 return None  # a shorter step first: the safeguarded path is costly
             if w_pred is None:
-                w_pred = a.eq.wrench + dw
+                w_pred = a.eq.wrench + (ds * t[1] if dw is None else dw)
             try:
                 eq = self.cont.solve(
                     target, x0=x_pred, wrench0=w_pred, raise_on_failure=False, fast_fail=True
@@ -581,13 +718,17 @@ class _Tracer:
 
     def _point_fn(self):
         """The compiled point kernel when wanted (:meth:`point`'s rule, ``VJM_PIN_JIT`` as read at
-        the start of the curve), else None."""
+        the start of the curve), else None; with it the fused step's compiled helpers (``_fz``:
+        :func:`~vjm_pin.analysis.point_kernel.fused`)."""
         if self._fn is None:
             md = self._jit
             wanted = md == "1" or (md == "auto" and ("numba" in sys.modules or _pk._compiled))
             if wanted and use_compiled(self._npts):
                 self._fn = compiled()
-        return self._fn or None
+        fn = self._fn or None
+        if fn is not None and self._fz is None and self._dense_point:
+            self._fz = _pk.fused()
+        return fn
 
     def _fused_step(self, a: _BP, s: float, target, x_pred, move: float, t):
         """:meth:`step`'s corrector and point in one lean pass (the common step of a curve): the
@@ -597,7 +738,11 @@ class _Tracer:
         point, None (the corrector strayed: the step is rejected, as :meth:`step`), or
         :data:`_GENERAL` when the local iteration gave way (the caller goes on as after
         ``_solve_local`` returned None). Every number is that of the general path; a point the
-        compiled point kernel declines goes through :meth:`point` (its generic path)."""
+        compiled point kernel declines goes through :meth:`point` (its generic path). With the
+        compiled kernels the continuity check, the point kernel and the tangent's layout are one
+        call (:func:`~vjm_pin.analysis.point_kernel._fused_point_loops`). Where the compiled corrector
+        certified "stable" without the eigenvalues of eq. (23) the point is a :class:`_LateBP`: ``λ``
+        computed when first read (the tracer's verdicts ask the certificate first)."""
         solver = self.cont
         rt = self._rt
         if rt is not None and rt[0] == target[3:].tobytes():  # displace(p0, r0, target), its rotation kept
@@ -608,34 +753,49 @@ class _Tracer:
         raw = solver._corrector(self._corr, p_t, r_t, x_pred, flushed=True)  # (step flushed x_pred)
         if raw is None:
             return _GENERAL
-        x = raw[0]
-        corr = self.scaled(x - x_pred)
-        if not corr <= CORRECTOR_RATIO * move + 1e-9:
+        fz = self._fz
+        if fz is None:
+            self._point_fn()  # (the compiled point kernel when wanted: also for point() below)
+            fz = self._fz
+        kf = raw[4]
+        if fz is None or kf[6].shape != (self.kernel.n, self.kernel.n):
+            corr = self.scaled(raw[0] - x_pred)
+            if not corr <= CORRECTOR_RATIO * move + 1e-9:
+                return None
+            eq = solver._corrector_result(raw, p_t, r_t)
+            p = self.point(eq, s)
+            p.hist = (a.s, t[0], t[1])
+            return p
+        pa = self._pargs
+        if pa is None:
+            pk = self.kernel
+            mask = self.mask if self.mask is not None else pk._nomask
+            pa = self._pargs = (pk.kz, pk.task, pk.dt, mask, pk.nt, self.mask is not None, FAST_RANK, SINGULAR_RCOND,
+                                np.zeros(6))
+        x_dot = np.empty(self._nq)
+        w_dot = np.empty(6)
+        try:
+            st, k, mu, rate = fz[1](raw[0], x_pred, CORRECTOR_RATIO * move + 1e-9, self.free, self.var_scale,
+                                    raw[3].jacobian, kf[6], pa[0], pa[1], pa[2], pa[3], kf[7] if pa[5] else pa[8],
+                                    pa[4], pa[5], pa[6], pa[7], x_dot, w_dot)
+        except np.linalg.LinAlgError:  # an exactly singular matrix (numba's np.linalg raises): after the check
+            st = 1
+        if st < 0:  # the corrector strayed
             return None
+        self._npts += 1
         eq = solver._corrector_result(raw, p_t, r_t)
-        fn = self._point_fn()
-        pk = self.kernel
-        kf, ev = raw[4], raw[5]
-        if fn is None or not self._dense_point or kf[6].shape != (pk.n, pk.n):
+        if st:  # the point kernel declines: the generic path (Blocks kept by the corrector)
             p = self.point(eq, s)
         else:
-            self._npts += 1
-            w = eq.wrench
-            pa = self._pargs
-            if pa is None:
-                mask = self.mask if self.mask is not None else pk._nomask
-                pa = self._pargs = (pk.kz, pk.task, pk.dt, mask, pk.nt, self.mask is not None, FAST_RANK, SINGULAR_RCOND)
-            jfree = np.ascontiguousarray(raw[3].jacobian.take(self.free, axis=1))
-            try:
-                st, k, xd, fd, mu, rate = fn(jfree, kf[6], pa[0], pa[1], pa[2], pa[3],
-                                             w if pa[5] else np.zeros(6), pa[4], pa[5], pa[6], pa[7])
-            except np.linalg.LinAlgError:
-                st = 1
-            if st:  # the point kernel declines: the generic path (Blocks kept by the corrector)
-                p = self.point(eq, s)
+            ev = raw[5]
+            if ev is None:  # "stable" certified, the eigenvalues when first read (_LateBP)
+                p = _LateBP(s, eq, self.d @ eq.wrench, k, mu, raw[7])
             else:
                 lam = float(ev[-1]) if ev.size else -np.inf  # (ascending: _max_eig)
-                p = self._kernel_point(eq, s, k, mu, lam, xd, fd, rate if pa[5] else None)
+                p = _BP(s, eq, self.d @ eq.wrench, k, None, mu, lam)
+            if pa[5] and _analytic_rate:
+                p.dmu = rate
+            p.tan = (x_dot, w_dot)
         p.hist = (a.s, t[0], t[1])
         return p
 
@@ -871,7 +1031,7 @@ class _Tracer:
             if (
                 nxt is not None
                 and s_try - cur.s > FINE_STEP * self.range
-                and (cur.mu < 0 <= nxt.mu or cur.lam < -self.thr <= nxt.lam)
+                and (cur.mu < 0 <= nxt.mu or (cur.below(self.thr) and nxt.above(self.thr)))
             ):
                 nxt = None  # a stability change is only accepted over a fine step (no jump across a knee)
             if nxt is None:
@@ -888,7 +1048,7 @@ class _Tracer:
                 self.seg_margin = 0.0
                 h = max(self.eps(cur.s), h / 4)
                 continue
-            if nxt.lam >= -self.thr and cur.lam < -self.thr:
+            if nxt.above(self.thr) and cur.below(self.thr):
                 # eq. (23) lost without a new force-control event (μ ≥ 0 already): switch
                 u, _, _ = self.locate_lam(cur, nxt)
                 sw = self.switch(
@@ -965,18 +1125,19 @@ def rigid_start_force(mu, scale: float) -> float | None:
 
 
 def _curve_point(p: _BP, thr: float) -> CurvePoint:
-    held = bool(p.lam < -thr)
-    return _frozen(  # CurvePoint(...) without its field-by-field frozen __init__ (one per point)
-        CurvePoint,
-        deflection=float(p.s),
-        force=float(p.force),
-        wrench=np.asarray(p.eq.wrench, float).copy(),
-        stable=held,
-        stiffness=p.k,
-        equilibrium=p.eq,
-        stable_end_held=held,
-        force_control_margin=float(-p.mu),
-    )
+    held = bool(p.below(thr))
+    w = p.eq.wrench
+    # CurvePoint(...) without its field-by-field frozen __init__ (one per point): every field, in order
+    return _built(CurvePoint, {
+        "deflection": float(p.s),
+        "force": float(p.force),
+        "wrench": w.copy() if type(w) is np.ndarray and w.dtype == np.float64 else np.asarray(w, float).copy(),
+        "stable": held,
+        "stiffness": p.k,
+        "equilibrium": p.eq,
+        "stable_end_held": held,
+        "force_control_margin": float(-p.mu),
+    })
 
 
 def _trace_branch(vm, d, start_eq: EquilibriumResult, s_values, kin, solver) -> list[CurvePoint]:
@@ -1047,11 +1208,25 @@ def _reference_equilibrium(vm, solver, kin) -> EquilibriumResult | None:
     from vjm_pin.solver import blocks_at
     from vjm_pin.solver.stability import check_stability
 
+    x = _reference_x(vm)
+    if x is None:
+        return None
+    return _reference_result(vm, solver, x, check_stability(blocks_at(vm, x, np.zeros(6), kin)))
+
+
+def _reference_x(vm) -> np.ndarray | None:
+    """A copy of the reference configuration, or None when a spring is preloaded there (not an
+    equilibrium without load)."""
     x = np.asarray(vm.reference, float).copy()
     stat = vm.K_theta @ (x[vm.theta_idx] - vm.theta0)
     if stat.size and np.abs(stat).max() > 0:
         return None
-    b = blocks_at(vm, x, np.zeros(6), kin)
+    return x
+
+
+def _reference_result(vm, solver, x: np.ndarray, stability) -> EquilibriumResult:
+    """The result of the unloaded reference ``x`` (:func:`_reference_x`) with its eq. (23) verdict
+    ``stability`` (path ``"reference"``, zero wrench and deflection, 0 iterations)."""
     return EquilibriumResult(
         x=x,
         q=x[vm.q_idx].copy(),
@@ -1065,7 +1240,7 @@ def _reference_equilibrium(vm, solver, kin) -> EquilibriumResult | None:
         residuals={"position": 0.0, "orientation": 0.0, "statics": 0.0},
         energy=0.0,
         path="reference",
-        stability=check_stability(b),
+        stability=stability,
     )
 
 

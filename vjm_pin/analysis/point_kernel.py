@@ -47,6 +47,7 @@ import sys
 
 import numpy as np
 
+from vjm_pin.kinematics.chain import FLUSH_BELOW
 from vjm_pin.solver.chain_kernel import _rate_lin, _rate_terms, _twists
 from vjm_pin.solver.kernel import _back_substitute
 from vjm_pin.solver.lapack import lapack as _lapack
@@ -714,6 +715,73 @@ def _point_loops(jfree, hz, kz, task, dt, mask, wrench, nt, use_rate, fast_rank,
     return 0, k, xd, fd, mu, quad - 2.0 * _rate_lin(dli, dom, w, g, task)
 
 
+def _scaled_diff(a, b, free, vscale):
+    """``max |(a − b)[free] / vscale|`` (NaN when any term is NaN, 0 without ``free``), the numbers of
+    ``float(np.abs((a − b)[free] / vscale).max())`` (:meth:`~vjm_pin.analysis.curve._Tracer.scaled`)."""
+    mv = 0.0
+    nan = False
+    for c in range(free.shape[0]):
+        f = free[c]
+        v = abs((a[f] - b[f]) / vscale[c])
+        if v > mv:
+            mv = v
+        elif np.isnan(v):
+            nan = True
+    return np.nan if nan else mv
+
+
+def _predict_loops(ax, xd, ds, free, vscale, flush, xp):
+    """The tangent prediction of a curve's sub-step (:meth:`~vjm_pin.analysis.curve._Tracer.step`):
+    ``xp = ax + ds·xd`` with entries below :data:`~vjm_pin.kinematics.chain.FLUSH_BELOW` flushed to zero when ``flush``
+    (:func:`~vjm_pin.kinematics.chain.flush_tiny`), written into ``xp``; returns the scaled move
+    ``max |(xp − ax)[free] / vscale|`` (:func:`_scaled_diff`). The same operations as the numpy
+    expressions, element by element: the same numbers."""
+    for i in range(ax.shape[0]):
+        v = ax[i] + ds * xd[i]
+        if flush and abs(v) < FLUSH_BELOW:
+            v = 0.0
+        xp[i] = v
+    return _scaled_diff(xp, ax, free, vscale)
+
+
+def _fused_point_loops(x, x_pred, limit, free, vscale, j6, hz, kz, task, dt, mask, wrench, nt, use_rate,
+                       fast_rank, sing_rcond, x_dot, w_dot):
+    """The continuity check of a corrected sub-step and its point in one call (the fused step of
+    :meth:`~vjm_pin.analysis.curve._Tracer._fused_step`): the scaled corrector displacement
+    ``‖x − x_pred‖`` (:func:`_scaled_diff`) against ``limit``, then :func:`_point_loops` on the free
+    columns of the frame Jacobian ``j6`` (6, nq) and ``hz``, and the tangent of eq. (29) scattered into
+    ``x_dot`` (nq,, zero outside ``free``) and ``w_dot`` (6,, zero outside ``task``). Returns
+    ``(status, k, μ, dμ/ds)``: status −1 when the corrector strayed (nothing else done), 1 when the point
+    kernel declines (the generic path decides), 0 when every number is valid."""
+    nan = np.nan
+    corr = _scaled_diff(x, x_pred, free, vscale)
+    if not corr <= limit:
+        return -1, nan, nan, nan
+    n = free.shape[0]
+    jfree = np.empty((6, n))
+    for a_ in range(6):
+        for b in range(n):
+            jfree[a_, b] = j6[a_, free[b]]
+    st, k, xd, fd, mu, rate = _point_jit(jfree, hz, kz, task, dt, mask, wrench, nt, use_rate, fast_rank, sing_rcond)
+    if st:
+        return 1, nan, nan, nan
+    for i in range(x_dot.shape[0]):
+        x_dot[i] = 0.0
+    for c in range(n):
+        x_dot[free[c]] = xd[c]
+    for i in range(6):
+        w_dot[i] = 0.0
+    for r in range(task.shape[0]):
+        w_dot[task[r]] = fd[r]
+    return 0, k, mu, rate
+
+
+#: numba options of this module's compiled functions: numpy's error model (a division by zero gives
+#: inf or NaN, which the status tests decline, instead of raising and an extra test in every division
+#: loop; the numbers are otherwise the same).
+_NJIT = {"nogil": True, "error_model": "numpy"}
+_point_jit = _point_loops  # the point kernel :func:`_fused_point_loops` calls (compiled by compiled())
+_fused = None  # the compiled (_predict_loops, _fused_point_loops, _scaled_diff) once loaded (compiled())
 _compiled = None  # the compiled _point_loops once loaded, False when numba is unavailable
 
 
@@ -741,14 +809,38 @@ def compiled():
             chain_kernel._load()  # the dμ/ds helpers shared with the chain kernel, compiled there
             for name in chain_kernel.RATE_HELPERS:
                 g[name] = getattr(chain_kernel, name)
-            g["_top_eigpair"] = numba.njit(cache=True, nogil=True)(_top_eigpair)
-            _compiled = numba.njit(cache=True, nogil=True)(_point_loops)
+            g["_top_eigpair"] = numba.njit(cache=True, **_NJIT)(_top_eigpair)
+            _compiled = numba.njit(cache=True, **_NJIT)(_point_loops)
+            _fused_load(numba, {"cache": True, **_NJIT})
         except RuntimeError:  # no writable cache location: compile in memory
             for name in ("_top_eigpair", *chain_kernel.RATE_HELPERS):
                 fn = g[name]
-                g[name] = numba.njit(nogil=True)(getattr(fn, "py_func", fn))
-            _compiled = numba.njit(nogil=True)(_point_loops)
+                g[name] = numba.njit(**_NJIT)(getattr(fn, "py_func", fn))
+            _compiled = numba.njit(**_NJIT)(_point_loops)
+            _fused_load(numba, dict(_NJIT))
     return _compiled
+
+
+def _fused_load(numba, opts) -> None:
+    """Compile the fused step's helpers (:func:`fused`) with the compiled point kernel."""
+    global _fused, _point_jit
+    _point_jit = _compiled
+    g = globals()
+    sd = g["_scaled_diff"] = numba.njit(**opts)(getattr(_scaled_diff, "py_func", _scaled_diff))
+    _fused = (
+        numba.njit(**opts)(getattr(_predict_loops, "py_func", _predict_loops)),
+        numba.njit(**opts)(getattr(_fused_point_loops, "py_func", _fused_point_loops)),
+        sd,
+    )
+
+
+def fused():
+    """The compiled ``(_predict_loops, _fused_point_loops, _scaled_diff)`` (the fused step of
+    :meth:`~vjm_pin.analysis.curve._Tracer._fused_step`), loaded with :func:`compiled`; None when
+    numba cannot be imported."""
+    if _fused is None:
+        compiled()
+    return _fused or None
 
 
 def use_compiled(points_so_far: int) -> bool:

@@ -34,12 +34,25 @@ Two iterations are offered:
 Both are wrapped in continuation (``t_i = α_i t + (1−α_i) t₀``, eq. after 10) and
 perturbed restarts (small seeded random noise on ``(q, θ)``, §4.1) when an iteration
 stalls; an unstable equilibrium is left along its unstable eigenvectors first
-(:meth:`EquilibriumSolver._escape`). The result says which path was used.
+(:meth:`EquilibriumSolver._escape`). The result says which path was used. Inside an escape
+attempt the safeguarded iteration hands over to at most :data:`HANDOFF_STEPS` unmodified Newton
+steps from each accepted iterate (:meth:`EquilibriumSolver._relaxed_local`: positive definite
+reduced Hessian, step limit, no residual-halving test, which a soft mode next to a bifurcation
+fails), kept when they reach a stable equilibrium of no higher energy; the same equilibrium, in
+fewer safeguarded iterations and restorations.
+
+A warm start from the equilibrium the solver found last (a curve's next point, ``x0`` = that
+result's ``x``) takes a lean path (:meth:`EquilibriumSolver._solve_lean`): the same checks,
+iterations and results bit for bit, without the general set-up (the kernel context is kept
+between solves, the compiled kernel is called directly with its buffers, the result is built
+once); for models of order ≤ :data:`~vjm_pin.solver.stability.SCIPY_LAPACK_MAX_N` it also runs
+without the BLAS thread limit, as OpenBLAS uses one thread at these orders.
 
 Every iterate's coordinates smaller than :data:`~vjm_pin.kinematics.chain.FLUSH_BELOW` (1e-150) are
 set to exactly zero (:func:`~vjm_pin.kinematics.chain.flush_tiny`): on a straight column they would
 otherwise converge to subnormal floats, which slow Pinocchio, without changing any result. The
-public calls run with one BLAS thread (:mod:`vjm_pin.solver.threads`).
+public calls run with one BLAS thread (:mod:`vjm_pin.solver.threads`; the lean warm-start path of
+a small model excepted, see below).
 
 Mixed control (:meth:`EquilibriumSolver.solve_mixed`): each task component is *held*
 (deflection prescribed) or *loaded* (dead force/moment prescribed). The equilibrium is a
@@ -113,6 +126,7 @@ from vjm_pin.solver.stability import (
     SCIPY_LAPACK_MAX_N,
     STABILITY_TOL,
     DeferredStability,
+    SpectrumLater,
     StabilityResult,
     check_stability,
     check_stability_held,
@@ -148,6 +162,9 @@ ROTATION_TARGET_FAIL = 1e-10
 #: converged to an unstable equilibrium (:meth:`EquilibriumSolver._escape`).
 ESCAPE_MODES = 2
 ESCAPE_AMPLITUDES = (1e-3, 1e-2, 1e-1)
+#: Steps of the escape's hand-off to the local iteration (:meth:`EquilibriumSolver._relaxed_local`):
+#: a short budget, so that it takes over only next to the equilibrium.
+HANDOFF_STEPS = 4
 #: Iterations of the plain local Newton attempt of a load-controlled solve, and the budget of
 #: its energy-descent attempt in units of ``max_iter``.
 LOCAL_MAX_ITER = 12
@@ -164,6 +181,11 @@ _safeguard_shortcuts = True
 #: Private switch of the fused Newton kernel (:mod:`vjm_pin.solver.kernel`): False runs the
 #: unfused local iteration (``_fast_factor`` / ``_fast_step``; for the tests and the benchmark).
 _fused_enabled = True
+#: Private switch of the curve corrector (:meth:`EquilibriumSolver._corrector_context`): True lets its
+#: compiled kernel certify a stable verdict without the eigenvalues of eq. (23), computed when first
+#: read (:class:`~vjm_pin.solver.stability.SpectrumLater`); False computes them at every point (the
+#: same numbers; for the tests and the benchmark).
+_corrector_defer = True
 #: Placeholder factorisation arrays of a fused-kernel call that computes its own (one array type
 #: for the compiled kernel), then an empty Jacobian for a call that reuses a cached one.
 _KERNEL_DUMMY = (np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 0)), np.zeros(0), np.zeros(0), np.zeros(0),
@@ -388,6 +410,32 @@ def _check_options(*, method, tol, max_iter, restarts, perturbation, seed, follo
         raise InputError(f"follow_stable must be True or False; got {follow_stable!r}")
 
 
+@functools.lru_cache(maxsize=1)
+def _init_defaults() -> tuple:
+    """The public keyword options of :class:`EquilibriumSolver` and their defaults (read once)."""
+    params = inspect.signature(EquilibriumSolver.__init__).parameters
+    return tuple((k, p.default) for k, p in params.items() if k not in ("self", "vm") and not k.startswith("_"))
+
+
+#: :func:`_prismatic_columns` by model (the model kept with its answer, as
+#: :func:`~vjm_pin.kinematics.screw.screw_applicable`: an id is never reused while its entry lives).
+_PRISMATIC: dict[int, tuple[pin.Model, int, np.ndarray]] = {}
+
+
+def _prismatic_columns(model: pin.Model) -> np.ndarray:
+    """``(nv,)`` bool, read only: the velocity columns of prismatic joints, remembered per model
+    object (reading the joint types copies every joint model: ~0.2 ms at 148 joints)."""
+    hit = _PRISMATIC.get(id(model))
+    if hit is not None and hit[0] is model and hit[1] == model.njoints:  # a joint added since: asked again
+        return hit[2]
+    prism = np.array([model.joints[i + 1].shortname().startswith("JointModelP") for i in range(model.nv)], bool)
+    prism.flags.writeable = False
+    if len(_PRISMATIC) >= 16:
+        _PRISMATIC.pop(next(iter(_PRISMATIC)))
+    _PRISMATIC[id(model)] = (model, model.njoints, prism)
+    return prism
+
+
 class EquilibriumSolver:
     """Solves eq. (5) for one model; keeps a Pinocchio ``Data`` and the reference pose.
 
@@ -449,9 +497,9 @@ class EquilibriumSolver:
         self.free = np.concatenate([vm.theta_idx, vm.q_idx]).astype(int)
         self.nt = vm.n_theta
         pin.forwardKinematics(vm.model, self.kin.data, vm.reference)
-        pts = [m.translation for m in self.kin.data.oMi[1:]] + [self.p0]
-        self.length_scale = max(max(np.linalg.norm(p - self.p0) for p in pts), 1e-3)
-        prism = np.array([vm.model.joints[i + 1].shortname().startswith("JointModelP") for i in range(vm.model.nv)])
+        pts = np.array([m.translation for m in self.kin.data.oMi[1:]] + [self.p0])
+        self.length_scale = max(float(np.sqrt(((pts - self.p0) ** 2).sum(axis=1)).max()), 1e-3)
+        prism = _prismatic_columns(vm.model)
         self.var_scale = np.where(prism[self.free], self.length_scale, 1.0)
         self.kscale = float(np.abs(vm.K_theta).max())
         # per-task-row scale of pose errors (m rows by L_c, rad rows by 1), and the row groups
@@ -466,6 +514,7 @@ class EquilibriumSolver:
         self._smask = self.kin.support_mask(self.free) if hasattr(self.kin, "support_mask") else None
         self._all_task = self.task == [0, 1, 2, 3, 4, 5]
         self._off_task = np.array([i for i in range(6) if i not in self.task], int)
+        self._off_task_list = self._off_task.tolist()
         self._r_unrotated = displace(self.p0, self.r0, np.zeros(6))[1]  # target rotation of a zero rotation part
         self._ip = np.array(self._rows_p, int)
         self._zero3 = np.zeros(3)  # erot of a task without rotations (the kernels only read it)
@@ -480,13 +529,16 @@ class EquilibriumSolver:
         self._fast_cache: tuple[bytes, dict, StabilityResult | None] | None = None
         self._fast_fact: tuple | None = None  # factorisation at the last fast-path equilibrium
         self._kpack: tuple | None = None  # constants of the fused kernel (_kernel_consts)
+        self._lean_ctx: tuple | None = None  # the warm-start solve's kernel context (_lean_context)
+        # (key of _fast_fact, ‖R‖_F‖R⁻¹‖_F ≥ cond(J) there) from the compiled kernel (kernel._iterate_into)
+        self._fast_cond: tuple | None = None
+        self._handoff = False  # inside _escape: the safeguarded iteration hands off (_relaxed_local)
 
     def _sibling(self, **options) -> EquilibriumSolver:
         """A solver of the same model with the given options (the defaults of ``__init__``
         for the others) that shares this one's :class:`Kinematics`: creating a ``pin.Data``
         costs seconds for finely subdivided models. Use in the same thread only."""
-        params = inspect.signature(EquilibriumSolver.__init__).parameters
-        opts = {k: p.default for k, p in params.items() if k not in ("self", "vm") and not k.startswith("_")}
+        opts = dict(_init_defaults())
         opts.update(options)
         _check_options(**opts)
         new = copy.copy(self)
@@ -495,6 +547,8 @@ class EquilibriumSolver:
         new.max_step = 0.3
         new._fast_cache = None
         new._fast_fact = None
+        new._lean_ctx = None  # (its buffers are this solver's)
+        new._fast_cond = None
         return new
 
     # ----------------------------------------------------------------- helpers
@@ -707,8 +761,9 @@ class EquilibriumSolver:
         cf = consts[1].copy()
         consts = (consts[0], cf) + tuple(consts[2:])
         # [mode, consts, cf, thr, the step function last used, its direct compiled call (kernel.lean) with
-        # the constants or None, that call's buffers (kernel.workspace)]
-        return [_kernel.mode(), consts, cf, thr, None, None, None]
+        # the constants or None, that call's buffers (kernel.workspace), stable verdicts certified without
+        # the eigenvalues (_fused_iterations; the tracer reads them when it needs them)]
+        return [_kernel.mode(), consts, cf, thr, None, None, None, _corrector_defer]
 
     def _corrector(self, ctx, p_t, r_t, x, flushed: bool = False):
         """:meth:`_fast_newton_fused` from ``x`` (a predicted point of a curve) towards the target
@@ -722,7 +777,7 @@ class EquilibriumSolver:
         result with :meth:`_corrector_result`). ``flushed``: ``x`` has no entry below 1e-150
         already (:func:`flush_tiny` would not change it)."""
         kernel = _kernel
-        md, consts, _, _, step_fn, _, _ = ctx
+        md, consts, step_fn = ctx[0], ctx[1], ctx[4]
         fn = kernel.get(md)
         if fn is not step_fn:  # first call, or auto mode switched to the compiled kernel
             small = getattr(fn, "dispatcher", None) is not None and int(consts[0][0]) < _chain_kernel_min_n()
@@ -732,7 +787,7 @@ class EquilibriumSolver:
         self._fast_its = 0
         return self._fused_iterations(ctx, p_t, r_t, x, flushed)
 
-    def _fused_iterations(self, ctx, p_t, r_t, x, flushed: bool = False):
+    def _fused_iterations(self, ctx, p_t, r_t, x, flushed: bool = False, relaxed: int = 0):
         """The fused local iteration of :meth:`_fast_newton_fused` and :meth:`_corrector` from ``x``
         towards the target ``(p_t, r_t)``: per iteration one Pinocchio call (frame Jacobian and end
         placement, none on a warm start from the equilibrium this solver just found) and one call
@@ -745,10 +800,18 @@ class EquilibriumSolver:
         writes into the buffers, replaced by fresh ones at convergence. Returns None when the plain
         local iteration gives way (``_fast_its`` set where it counts iterations), else
         ``(x, f, iterations, state, fact, ev, residuals, stability)`` (``fact`` = (J, Q or
-        reflectors, R, F, r, ∇E, H(F), F (6,)) of the kernel)."""
+        reflectors, R, F, r, ∇E, H(F), F (6,)) of the kernel). A context with an eighth item True
+        (:meth:`_lean_context`; :meth:`_corrector_context` while ``_corrector_defer`` holds) lets the
+        direct call certify a stable verdict without the eigenvalues
+        (:func:`vjm_pin.solver.kernel._iterate_into`): ``ev`` is then None and the verdict's
+        eigenvalues are computed when first read (:class:`~vjm_pin.solver.stability.SpectrumLater`).
+
+        ``relaxed`` (a number of steps, 0: off): steps are not required to halve the residual (still
+        a positive definite reduced matrix, within the step limit), at most ``relaxed`` of them; for
+        :meth:`_relaxed_local` only."""
         chain, kernel = _chain, _kernel
         kin, m, n = self.kin, len(self.task), len(self.free)
-        _, consts, cf, thr, step_fn, direct, _ = ctx
+        _, consts, cf, thr, step_fn, direct = ctx[:6]
         model, fid, data = kin.model, kin.frame_id, None  # data: kin.data when first needed
         pt = np.asarray(p_t, float)
         rt = np.asarray(r_t, float)
@@ -761,6 +824,8 @@ class EquilibriumSolver:
         ci = consts[0]
         if direct is not None:
             lean, kz, mask, theta0, vscale, escale = direct
+            defer = len(ctx) > 7 and ctx[7]
+        cond = None
         cont_, polish_, conv_ = kernel.CONTINUE, kernel.POLISH, kernel.CONVERGED
         kkt_prev = np.inf
         polish = 0
@@ -793,12 +858,15 @@ class EquilibriumSolver:
                 xout, ws = ctx[6]
                 status, kkt, ep, er, rs = lean(
                     j6, pos, erot, x, refactor, polish < POLISH_ITERATIONS, flush, kf, ci, cf, kz, mask, theta0,
-                    vscale, escale, xout, ws
+                    vscale, escale, xout, ws, thr, defer
                 )
                 if status == cont_ or status == polish_:
                     xn = xout.copy()
                 elif status == conv_:  # the buffers now belong to the caches: fresh ones
-                    kf, ev = ws[:8], ws[8]
+                    kf, ev, sym, info = ws[:8], ws[8], ws[9], ws[10]
+                    if info[0]:  # stable, certified: the eigenvalues when first read
+                        ev = None
+                    cond = (key, info[1])
                     ctx[6] = kernel.workspace(ci, model.nq)
             else:
                 status, kkt, ep, er, rs, kf, _, xn, ev = step_fn(
@@ -814,7 +882,7 @@ class EquilibriumSolver:
             if status == kernel.RANK_FAIL:
                 return None
             if status == kernel.CONVERGED:
-                stable = bool(ev.size == 0 or ev[-1] < -thr)  # (ascending)
+                stable = ev is None or bool(ev.size == 0 or ev[-1] < -thr)  # (ascending)
                 if self.follow_stable and not stable:
                     self._fast_its = it
                     return None
@@ -823,17 +891,21 @@ class EquilibriumSolver:
                     st = _built(KinematicState, {"position": pos.copy(), "rotation": mo.rotation.copy(), "jacobian": j6,
                                                  "hessian": None})
                     kin._last = (key, st)  # kin.evaluate(x, hessian=False) at this point: no Pinocchio call
-                stab = self._kernel_stability(stable, ev, n - m, thr, jac, hz, st)
+                if ev is None:
+                    stab = SpectrumLater(True, n - m, thr, sym, kernel.spectrum)
+                else:
+                    stab = self._kernel_stability(stable, ev, n - m, thr, jac, hz, st)
                 res = {"position": float(ep), "orientation": float(er), "statics": float(rs)}
                 wkey = key + f6.tobytes()
                 self._fast_cache = (wkey + pt.tobytes() + rt.tobytes(), res, stab, x, f, f6, p_t, r_t)
                 self._fast_fact = (key, kin, st, jac, qf, rr, f, r, tau, hz, f6, step_fn)
+                self._fast_cond = cond
                 # the Blocks at this equilibrium (as evaluate_blocks builds them), built when first
                 # asked for (a curve point's stiffness): kept lazily
                 remember_lazy(self.vm, kin, wkey, _blocks_builder(jac, hz, self.nt, self.vm.K_theta, st))
                 return x, f, it, st, kf, ev, res, stab
             self._fast_its = it
-            if it and not kkt < 0.5 * kkt_prev or it - polish >= self._fast_max_iter:
+            if (it and not relaxed and not kkt < 0.5 * kkt_prev) or it - polish >= (relaxed or self._fast_max_iter):
                 return None
             if status != kernel.CONTINUE:
                 return None
@@ -842,12 +914,32 @@ class EquilibriumSolver:
         return None
     def _corrector_result(self, raw, p_t, r_t, path: str = "newton+tangent-predictor") -> EquilibriumResult:
         """The :class:`EquilibriumResult` of a converged :meth:`_corrector` (what :meth:`_result`
-        builds from the fused iteration's convergence)."""
+        builds from the fused iteration's convergence): the fields of :meth:`_pack`, the ones derived
+        from the configuration and the end placement (``q``, ``theta``, ``deflection``, ``position``,
+        ``rotation``, ``energy``) computed when first read
+        (:class:`~vjm_pin.solver.deferred_result.DeferredResult`: most results of a curve's steps are
+        never read), by the same expressions: the same numbers."""
+        from vjm_pin.solver.deferred_result import deferred_result
+
         x, _, it, st, kf, _, res, stab = raw
-        return self._pack(
-            x, kf[7].copy(), st, True, it, dict(res), path, stab, stab, tuple(self.task),
-            () if stab.stable else (UNSTABLE_HELD_NOTE,),
-        )
+        src = self.__dict__.get("_deferred_src")
+        if src is None or src[0] is not self.vm or src[1] is not self.task:
+            vm = self.vm
+            src = self._deferred_src = (vm, self.task, tuple(self.task), self.p0, self.r0, vm.theta_idx, vm.theta0,
+                                        vm.q_idx, vm.K_theta)
+        return deferred_result({
+            "x": x.copy(),
+            "wrench": kf[7].copy(),
+            "converged": True,
+            "iterations": int(it),
+            "residuals": dict(res),
+            "path": path,
+            "stability": stab,
+            "held": src[2],
+            "stability_end_held": stab,
+            "warnings": () if stab.stable else (UNSTABLE_HELD_NOTE,),
+            "checks": {},
+        }, (x.copy(), st.position, st.rotation) + src[3:])  # (x: a copy of its own, as the one above)
 
     def _fast_factor(self, x, f6, qfull, big):
         """The quantities of one :meth:`_fast_newton` iteration at ``x``: (state, J (task
@@ -1028,6 +1120,27 @@ class EquilibriumSolver:
                 it += itp
         return x, f, it + spent, ok, state
 
+    def _relaxed_local(self, x, p_t, r_t):
+        """The fused local iteration from ``x`` (a feasible iterate of the safeguarded path that
+        descended from a push off an unstable equilibrium, :meth:`_escape`) with the relaxed progress
+        test of :meth:`_fused_iterations`: unmodified Newton steps of eq. (28) while the reduced
+        Hessian is positive definite and the step within the step limit (at most :data:`HANDOFF_STEPS`),
+        kept only if they converge to a stable equilibrium whose energy does not exceed that at ``x``
+        (the safeguarded path only descends from ``x``). Next to a bifurcation the residual of a
+        full Newton step rises before it falls (a soft mode), so the plain local iteration gives way
+        where these steps converge. Returns (x, f, iterations, state) or None (the safeguarded
+        iteration goes on from ``x``)."""
+        if self.method != "newton" or not self.follow_stable:
+            return None
+        ctx = self._lean_context()
+        if ctx is None:
+            return None
+        e0 = self.energy(x)
+        raw = self._fused_iterations(ctx, p_t, r_t, x, relaxed=HANDOFF_STEPS)
+        if raw is None or not self.energy(raw[0]) <= e0 + 1e-14 * max(abs(e0), 1e-300):
+            return None
+        return raw[:4]
+
     def _newton_safeguarded(self, x, f, p_t, r_t, max_iter):
         vm = self.vm
         kz = np.zeros((len(self.free), len(self.free)))
@@ -1047,6 +1160,11 @@ class EquilibriumSolver:
                 return x, f, it, True, state
             if it == max_iter:
                 break
+            if it and self._handoff:  # an escape attempt: the local iteration from the accepted iterate
+                got = self._relaxed_local(x, p_t, r_t)
+                if got is not None:
+                    xr, fr, itr, sr = got
+                    return xr, fr, it + itr, True, sr
             h = self._psi_hessian(x, state, full_wrench(vm, f))
             w = kz - h
             modified = False
@@ -1119,6 +1237,25 @@ class EquilibriumSolver:
         # the pose error's task rows (pose_error(...)[task]); log3 only when rotations are held
         rot, rows = self._ir.size > 0, self._task_rows
         solve, isfinite = np.linalg.solve, np.isfinite
+        step = _kernel.restorer() if getattr(_kernel.get(), "dispatcher", None) is not None else None
+        if step is not None:  # the compiled step (kernel._restore_step): the same iteration
+            pt = np.asarray(p_t, float)
+            flush, zero3, nq = bool(_chain._flush_enabled), self._zero3, x.shape[0]
+            for _ in range(max_iter + 1):
+                if state is None:
+                    state = kin.evaluate(x, hessian=False)
+                erot = pin.log3(np.asarray(r_t) @ state.rotation.T) if rot else zero3
+                xn = np.empty(nq)
+                status = step(state.position, erot, state.jacobian, x, task, free, minv, escale, vscale, pt, lim,
+                              max_step, flush, xn)
+                if status == 1:
+                    return x, state, True
+                if status < 0:
+                    return x, state, False
+                x, state = xn, None
+            state = kin.evaluate(x, hessian=False)
+            e = pose_error(p_t, r_t, state.position, state.rotation)[self.task]
+            return x, state, bool(np.abs(e).max() <= max(tol_p, self.tol))
         for _ in range(max_iter + 1):
             if state is None:
                 state = kin.evaluate(x, hessian=False)
@@ -1209,13 +1346,17 @@ class EquilibriumSolver:
         total end wrench ``w6``, shared by the all-held and the mixed-control solves."""
         vm = self.vm
         pos, rot = state.position, state.rotation
-        d = x[vm.theta_idx] - vm.theta0  # energy(x)
+        theta = x[vm.theta_idx]  # (index arrays: already copies)
+        d = theta - vm.theta0  # energy(x)
+        dfl = np.empty(6)  # kinematics.chain.deflection, written in place
+        np.subtract(pos, self.p0, out=dfl[:3])
+        dfl[3:] = pin.log3(rot @ self.r0.T)
         return _built(EquilibriumResult, {
             "x": x.copy(),
-            "q": x[vm.q_idx],  # (index arrays: already copies)
-            "theta": x[vm.theta_idx],
+            "q": x[vm.q_idx],
+            "theta": theta,
             "wrench": w6,
-            "deflection": np.concatenate([pos - self.p0, pin.log3(rot @ self.r0.T)]),  # kinematics.chain.deflection
+            "deflection": dfl,
             "position": pos.copy(),
             "rotation": rot.copy(),
             "converged": bool(ok),
@@ -1384,7 +1525,6 @@ class EquilibriumSolver:
         return res
 
     # ----------------------------------------------------------------- deflection-driven
-    @one_blas_thread
     def solve(
         self,
         deflection=None,
@@ -1424,6 +1564,22 @@ class EquilibriumSolver:
                 perturbed restarts: for trial points of a line search, where a failure only
                 shortens the step and the full recovery is wasted.
         """
+        if target is None and x0 is not None and len(self.free) <= SCIPY_LAPACK_MAX_N:
+            # a warm start (curve tracing) of a small model: the lean path when it applies, without
+            # the BLAS thread limit (OpenBLAS runs one thread at these orders anyway; its fallback
+            # takes the limit)
+            res = self._solve_lean(deflection, x0, wrench0, raise_on_failure, fast_fail)
+            if res is not None:
+                return res
+        return self._solve_limited(deflection, target, x0, wrench0, raise_on_failure, fast_fail)
+
+    @one_blas_thread
+    def _solve_limited(self, deflection, target, x0, wrench0, raise_on_failure, fast_fail) -> EquilibriumResult:
+        """:meth:`solve` under one BLAS thread (:mod:`vjm_pin.solver.threads`)."""
+        if target is None and x0 is not None and len(self.free) > SCIPY_LAPACK_MAX_N:
+            res = self._solve_lean(deflection, x0, wrench0, raise_on_failure, fast_fail)
+            if res is not None:
+                return res
         x_start = self._start(x0)
         f_start = self._task_wrench(wrench0)
 
@@ -1455,20 +1611,131 @@ class EquilibriumSolver:
         ev, vecs = np.linalg.eigh(reduced_matrix(b, basis))
         thr = res.stability.tolerance if res.stability is not None else 0.0
         found = []
-        for j in np.argsort(-ev)[:ESCAPE_MODES]:
-            if ev[j] < -thr:
-                break
-            v = basis @ vecs[:, j]
-            v = v / max(np.abs(v / self.var_scale).max(), 1e-300)
-            for sign in (1.0, -1.0):
-                for amp in ESCAPE_AMPLITUDES:
-                    x = res.x.copy()
-                    x[self.free] += sign * amp * v
-                    r2 = attempt_once(x)
-                    if r2.converged and r2.stable:
-                        found.append(r2)
-                        break
+        self._handoff = True
+        try:
+            for j in np.argsort(-ev)[:ESCAPE_MODES]:
+                if ev[j] < -thr:
+                    break
+                v = basis @ vecs[:, j]
+                v = v / max(np.abs(v / self.var_scale).max(), 1e-300)
+                for sign in (1.0, -1.0):
+                    for amp in ESCAPE_AMPLITUDES:
+                        x = res.x.copy()
+                        x[self.free] += sign * amp * v
+                        r2 = attempt_once(x)
+                        if r2.converged and r2.stable:
+                            found.append(r2)
+                            break
+        finally:
+            self._handoff = False
         return found
+
+    def _start_regular(self, x_start, jz0=None) -> bool:
+        """False when ``J`` (task rows, free columns) at the start is rank deficient (smallest
+        singular value ≤ 1e-9 × the largest): the start is then perturbed (§4.1). A warm start from
+        the last fast-path equilibrium reads its kept ``J`` (or ``jz0``: that ``J``, given)."""
+        fact = self._fast_fact
+        if jz0 is not None:
+            pass
+        elif fact is not None and fact[1] is self.kin and fact[0] == x_start.tobytes():
+            jz0 = fact[3]  # a warm start from the last fast-path equilibrium: its J (task rows, free columns)
+        else:
+            jz0 = self.kin.evaluate(x_start, hessian=False).jacobian[self._task_rows].take(self.free, axis=1)
+        sv = _singular_values(jz0)  # descending
+        return not (sv.size < len(self.task) or sv[-1] <= 1e-9 * max(sv[0], 1e-300))
+
+    def _lean_context(self):
+        """The kernel context of :meth:`_solve_lean` (the layout of :meth:`_corrector_context`), kept
+        while the kernel's constants and implementation stay the same; None when the fused local
+        iteration does not apply (another method, a task of 0 or ≥ n rows, no screw-form Hessian,
+        the fused kernel switched off). ``VJM_PIN_JIT`` is read at every call, as
+        :meth:`_fast_newton_fused` reads it."""
+        m, n = len(self.task), len(self.free)
+        if (m == 0 or m >= n or not _fused_enabled or self._smask is None
+                or not getattr(self.kin, "uses_screw", False)):
+            return None
+        kernel = _kernel
+        consts, thr = self._kernel_consts()
+        md = kernel.mode()
+        fn = kernel.get(md)
+        kept = self._lean_ctx
+        if kept is not None and kept[0] is consts and kept[1][4] is fn:
+            return kept[1]
+        cf = consts[1].copy()  # its own target slots
+        own = (consts[0], cf) + tuple(consts[2:])
+        # the compiled kernel called directly, its arrays into buffers (kernel.lean), below the chain
+        # kernel's order (as _corrector)
+        small = getattr(fn, "dispatcher", None) is not None and n < _chain_kernel_min_n()
+        lean = kernel.lean() if small else None
+        direct = (lean,) + own[2:] if lean is not None else None
+        ws = kernel.workspace(own[0], self.kin.model.nq) if lean is not None else None
+        # [mode, consts, cf, thr, step function, direct call, its buffers, stable verdicts certified without
+        # the eigenvalues (see _fused_iterations)], kept with the constants it was built from
+        ctx = [md, own, cf, thr, fn, direct, ws, True]
+        self._lean_ctx = (consts, ctx)
+        return ctx
+
+    def _solve_lean(self, deflection, x0, wrench0, raise_on_failure, fast_fail) -> EquilibriumResult | None:
+        """:meth:`solve` of a warm start from the equilibrium this solver found last (a curve's next
+        point): the same checks, iterations and result as the general path, with its set-up cut to
+        what this case needs; None (nothing done) when the case does not apply: another method, a
+        task with some but not all rotations, the fused kernel not applicable, inputs other than
+        float64 arrays of their final shapes, a non-finite or out-of-task input (the general path
+        raises its error), or ``x0`` not bit for bit the last fast-path equilibrium.
+
+        The deflection is read as :meth:`_vector6` reads a (6,) array, the start as :meth:`_start`
+        (finite, as that equilibrium is), ``wrench0`` validated as :meth:`_task_wrench` (the
+        local iteration does not read it; a later attempt does); the perturbed-start test of
+        :meth:`_solve_target` reads the kept ``J``; the plain local iteration is
+        :meth:`_fused_iterations` with the kernel context kept between solves
+        (:meth:`_lean_context`). When it gives way the solve goes on in :meth:`_solve_target`
+        (``spent``), as the general path does.
+
+        With the compiled kernel the start test reads the kernel's bound of ``cond(J)`` at that
+        equilibrium when it is conclusive (``_fast_cond``; the SVD otherwise) and a stable verdict's
+        eigenvalues are computed when first read (:class:`~vjm_pin.solver.stability.SpectrumLater`).
+        The result is a :class:`~vjm_pin.solver.deferred_result.DeferredResult` (:meth:`_corrector_result`):
+        the fields derived from ``x`` and the end placement computed when first read, the same numbers
+        as :meth:`_pack`'s."""
+        if self.method != "newton" or self._partial_task_rotation:
+            return None
+        fact = self._fast_fact
+        if (fact is None or fact[1] is not self.kin or type(x0) is not np.ndarray or x0.dtype != np.float64
+                or fact[0] != x0.tobytes() or x0.shape != (self.kin.model.nq,)):
+            return None
+        d = deflection
+        if type(d) is not np.ndarray or d.shape != (6,) or d.dtype != np.float64:
+            return None
+        # finite (a sum of Python floats: no overflow warning; a huge finite input overflows it to
+        # inf and takes the general path, which accepts it) and zero outside the task
+        dl = d.tolist()
+        if not math.isfinite(sum(dl)) or any(dl[i] for i in self._off_task_list):
+            return None
+        if wrench0 is not None:
+            w = wrench0
+            if type(w) is not np.ndarray or w.shape != (6,) or w.dtype != np.float64:
+                return None
+            wl = w.tolist()
+            if not math.isfinite(sum([wl[i] for i in self.task])):  # (task rows, as _task_wrench reads them)
+                return None
+        ctx = self._lean_context()
+        if ctx is None:
+            return None
+        fc = self._fast_cond
+        if not (fc is not None and fc[0] is fact[0] and 1e-9 * fc[1] < 0.5) and not self._start_regular(x0, fact[3]):
+            # (σ_min/σ_max ≥ 1/cond(J)-bound > 2e-9 passes _start_regular's test without its SVD)
+            return None  # (perturbed: the general path)
+        p_t, r_t = self._target_pose(d)
+        self._fast_its = 0
+        raw = self._fused_iterations(ctx, p_t, r_t, x0)
+        if raw is None:  # the plain local iteration gave way: the general path from there
+            x_start = x0.copy()
+            f_start = self._task_wrench(wrench0)
+            with single_blas_thread():
+                return self._solve_target(p_t, r_t, x_start, f_start, raise_on_failure, fast_fail, spent=self._fast_its)
+        # the fields derived from x and the end placement computed when first read (the same numbers
+        # as _pack: DeferredResult)
+        return self._corrector_result(raw, p_t, r_t, "newton")
 
     def _lowest(self, found: list[EquilibriumResult]) -> EquilibriumResult:
         """The equilibrium of lowest energy in ``found``; energies within ``10·tol`` (relative) of
@@ -1480,8 +1747,10 @@ class EquilibriumSolver:
         tie = 10.0 * self.tol * max(abs(low), 1e-300)
         return next(r for r in found if r.energy <= low + tie)
 
-    def _solve_target(self, p_t, r_t, x_start, f_start, raise_on_failure, fast_fail) -> EquilibriumResult:
-        """:meth:`solve` for the target pose ``(p_t, r_t)`` (every task row held)."""
+    def _solve_target(self, p_t, r_t, x_start, f_start, raise_on_failure, fast_fail, spent=None) -> EquilibriumResult:
+        """:meth:`solve` for the target pose ``(p_t, r_t)`` (every task row held). ``spent``: the start
+        passed the perturbed-start test and the plain local iteration from it already gave way after
+        ``spent`` iterations (:meth:`_solve_lean`); the attempt goes on from there."""
         rng = []  # the restart noise generator, seeded with ``seed`` when first used
         total = 0
         name = self.method
@@ -1517,26 +1786,23 @@ class EquilibriumSolver:
         def done(r):
             return r if r.iterations == total else replace(r, iterations=total)
 
-        # A start where the end cannot move in some constrained direction (e.g. a straight
-        # chain of rigid links) gives a singular eq. (28)/(10) matrix: perturb it first (§4.1).
-        fact = self._fast_fact
-        if fact is not None and fact[1] is self.kin and fact[0] == x_start.tobytes():
-            jz0 = fact[3]  # a warm start from the last fast-path equilibrium: its J (task rows, free columns)
+        if spent is not None:  # (the start passed its test in _solve_lean)
+            res = attempt(x_start, f_start, name, spent=spent)
         else:
-            jz0 = self.kin.evaluate(x_start, hessian=False).jacobian[self._task_rows].take(self.free, axis=1)
-        sv = _singular_values(jz0)  # descending
-        if sv.size < len(self.task) or sv[-1] <= 1e-9 * max(sv[0], 1e-300):
-            x_start = self._perturb(x_start, rng)
-            name += "+perturbed-start"
-        if name == "newton":  # the common case first, without the attempt machinery
-            self._fast_its = 0
-            fast = self._fast_newton(x_start, p_t, r_t)
-            if fast is not None:  # stable, or any equilibrium when not follow_stable: done
-                x, f, it, st = fast
-                return self._result(x, f, it, True, st, p_t, r_t, name)
-            res = attempt(x_start, f_start, name, spent=self._fast_its)
-        else:
-            res = attempt(x_start, f_start, name)
+            # A start where the end cannot move in some constrained direction (e.g. a straight
+            # chain of rigid links) gives a singular eq. (28)/(10) matrix: perturb it first (§4.1).
+            if not self._start_regular(x_start):
+                x_start = self._perturb(x_start, rng)
+                name += "+perturbed-start"
+            if name == "newton":  # the common case first, without the attempt machinery
+                self._fast_its = 0
+                fast = self._fast_newton(x_start, p_t, r_t)
+                if fast is not None:  # stable, or any equilibrium when not follow_stable: done
+                    x, f, it, st = fast
+                    return self._result(x, f, it, True, st, p_t, r_t, name)
+                res = attempt(x_start, f_start, name, spent=self._fast_its)
+            else:
+                res = attempt(x_start, f_start, name)
         if res.converged and (res.stable or not self.follow_stable):
             return done(res)
         best = res

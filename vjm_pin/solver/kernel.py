@@ -32,7 +32,11 @@ instead of ``2n²(n − m)``; own Cholesky and LU; LAPACK ``dsyevd``/``dgesdd`` 
 ``chain_kernel.ITERATE_MIN_N`` free coordinates the compiled entry point hands the iteration to
 :mod:`vjm_pin.solver.chain_kernel` (O(n) block elimination; at CONVERGED ``ev`` is then the largest
 eigenvalue of eq. (23) alone, and the solver reports the rest lazily:
-:class:`~vjm_pin.solver.stability.DeferredStability`).
+:class:`~vjm_pin.solver.stability.DeferredStability`). The direct call of the warm-started solve
+(:func:`lean`, :func:`_iterate_into`) decides clear-cut verdicts without LAPACK: the rank test by the
+bound ``‖R‖_F‖R⁻¹‖_F`` of ``cond(J)``, "stable" by a Cholesky factorisation past the threshold (the
+eigenvalues then computed when first read, :func:`spectrum`); undecided cases take the SVD and the
+eigenvalues as before, so every verdict is the same.
 
 Why numba (and not C++ through Pinocchio's CasADi/CppAD code generation or a C extension):
 it needs no compiler at install time (the wheel has LLVM inside), the fallback is the same
@@ -252,7 +256,17 @@ def _moved(x, free, dx, flush):
 
 # --------------------------------------------------------------------------- compiled kernel
 def _iterate_loops(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, ci, cf, kz, mask, theta0, vscale, escale):
-    """The compiled twin of :func:`iterate_numpy` (same contract; ``consts`` passed unpacked).
+    """The compiled twin of :func:`iterate_numpy` (same contract; ``consts`` passed unpacked):
+    :func:`_iterate_body` with the whole verdict."""
+    return _iterate_body(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, ci, cf, kz, mask, theta0, vscale,
+                         escale, False)
+
+
+def _iterate_body(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, ci, cf, kz, mask, theta0, vscale, escale,
+                  lazy):
+    """:func:`_iterate_loops`; ``lazy``: at convergence neither the rank test nor the eigenvalues, ``ev``
+    holds the matrix of eq. (23) ``−½(ZᵀWZ + (ZᵀWZ)ᵀ)`` row by row instead (``nz²``; RANK_FAIL still
+    when it is not finite): :func:`_iterate_into` decides the verdict.
 
     Plain loops (numba) and no explicit ``Q``: the reflectors ``H_k = I − τ_k v_k v_kᵀ`` of the QR
     are kept (``fact[1]``: rows ``v_k``, last row ``τ``) and applied where ``Q`` would multiply,
@@ -341,7 +355,7 @@ def _iterate_loops(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, c
                 smax = max(smax, abs(dx[c] / vscale[c]))
             if finite and smax > polish_step:
                 return POLISH, kkt, ep, er, rs, fact if keep else fact_in, dx if keep else empty, _moved_loops(x, free, dx, flush), empty
-    if not _full_rank(rr, m, rank_tol):
+    if not lazy and not _full_rank(rr, m, rank_tol):
         return RANK_FAIL, kkt, ep, er, rs, fact if keep else fact_in, empty, empty, empty
     sym = np.empty((nz, nz))
     for i in range(nz):
@@ -350,6 +364,8 @@ def _iterate_loops(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, c
             if not math.isfinite(v):
                 return RANK_FAIL, kkt, ep, er, rs, fact if keep else fact_in, empty, empty, empty
             sym[i, j] = v
+    if lazy:
+        return CONVERGED, kkt, ep, er, rs, fact, empty, empty, sym.ravel()
     ev = np.linalg.eigvalsh(sym)
     return CONVERGED, kkt, ep, er, rs, fact, empty, empty, ev
 
@@ -526,6 +542,39 @@ def _apply_qt(hh, v, m, n):
     return out
 
 
+def _lu_eliminate(a, y, k):
+    """In place: the LU factorisation with partial pivoting of ``a`` (k × k; ``dgesv``: ``L`` below the
+    diagonal, unit diagonal implied, ``U`` on and above it) with its row swaps and the forward
+    elimination applied to ``y`` (k,): ``U x = y`` then gives ``a⁻¹ y₀``. False on an exactly zero
+    pivot (``a`` and ``y`` partly eliminated)."""
+    for c in range(k):
+        p = c
+        big = abs(a[c, c])
+        for i in range(c + 1, k):
+            if abs(a[i, c]) > big:
+                big = abs(a[i, c])
+                p = i
+        if a[p, c] == 0.0:
+            return False
+        if p != c:
+            for j in range(k):
+                tmp = a[c, j]
+                a[c, j] = a[p, j]
+                a[p, j] = tmp
+            tmp2 = y[c]
+            y[c] = y[p]
+            y[p] = tmp2
+        inv = 1.0 / a[c, c]
+        for i in range(c + 1, k):
+            lik = a[i, c] * inv
+            a[i, c] = lik
+            if lik != 0.0:
+                for j in range(c + 1, k):
+                    a[i, j] -= lik * a[c, j]
+                y[i] -= lik * y[c]
+    return True
+
+
 def _step_loops(wq, hh, rr, e, r, n, m):
     """Compiled ``δx = Y p_Y − Z p_Z`` (see :func:`_null_space_step`) in the rotated basis:
     ``Rᵀ p_Y = e``, ``(ZᵀWZ) p_Z = (Qᵀ r)[m:] + (ZᵀWY) p_Y``, ``δx = Q [p_Y; −p_Z]``: (ok, δx)."""
@@ -551,31 +600,8 @@ def _step_loops(wq, hh, rr, e, r, n, m):
     for i in range(nz):
         for j in range(nz):
             lu[i, j] = wq[m + i, m + j]
-    for k in range(nz):
-        p = k
-        big = abs(lu[k, k])
-        for i in range(k + 1, nz):
-            if abs(lu[i, k]) > big:
-                big = abs(lu[i, k])
-                p = i
-        if lu[p, k] == 0.0:
-            return False, np.zeros(0)
-        if p != k:
-            for j in range(nz):
-                tmp = lu[k, j]
-                lu[k, j] = lu[p, j]
-                lu[p, j] = tmp
-            tmp2 = rhs[k]
-            rhs[k] = rhs[p]
-            rhs[p] = tmp2
-        inv = 1.0 / lu[k, k]
-        for i in range(k + 1, nz):
-            lik = lu[i, k] * inv
-            lu[i, k] = lik
-            if lik != 0.0:
-                for j in range(k + 1, nz):
-                    lu[i, j] -= lik * lu[k, j]
-                rhs[i] -= lik * rhs[k]
+    if not _lu_eliminate(lu, rhs, nz):
+        return False, np.zeros(0)
     pz = _back_substitute(lu, rhs, nz)
     # δx = Q [p_Y; −p_Z] = H_0 … H_{m−1} [p_Y; −p_Z]
     dx = np.empty(n)
@@ -608,23 +634,45 @@ def _moved_loops(x, free, dx, flush):
     return xn
 
 
-_iterate_jit = None  # the compiled _iterate_loops, set by lean() before it compiles _iterate_into
+_iterate_jit = None  # the compiled _iterate_body, set by lean() before it compiles _iterate_into
+_eig_jit = None  # the compiled _sym_eigvalsh, set by lean()
+
+#: Margin of the stability certificate of :func:`_certified_stable`, relative to ``‖A‖_F + thr``: far
+#: above the rounding of a Cholesky factorisation and of ``dsyevd`` (``~n²ε‖A‖``), so a certified
+#: verdict is the one the eigenvalues give.
+CERT_MARGIN = 1e-10
 
 
 def _iterate_into(J6, pos, erot, x, refactor, polish_left, flush, fact, ci, cf, kz, mask, theta0, vscale, escale,
-                  xout, ws):
+                  xout, ws, thr, defer):
     """:func:`_iterate_loops` (``keep`` False) with its arrays written into the caller's buffers
     instead of returned (compiled by :func:`lean`): ``xout`` (nq,) the new iterate (status CONTINUE /
-    POLISH); ``ws`` = ``(jac, hh, rr, f, r, tau, hz, f6, ev)`` shaped as the compiled kernel's
-    factorisation and the eigenvalues of eq. (23) (status CONVERGED). Returns ``(status, kkt, ep,
-    er, rs)``: no array crosses back into Python (each returned array costs its boxing, ~1 µs)."""
+    POLISH); ``ws`` (:func:`workspace`) = ``(jac, hh, rr, f, r, tau, hz, f6, ev, sym, info)`` shaped as
+    the compiled kernel's factorisation, the eigenvalues of eq. (23), its matrix and ``info`` (2,)
+    (status CONVERGED). Returns ``(status, kkt, ep, er, rs)``: no array crosses back into Python
+    (each returned array costs its boxing, ~1 µs).
+
+    At convergence the same verdicts as :func:`_iterate_loops`, cheaper where they are clear-cut:
+    the rank test passes without the SVD when ``rank_tol · ‖R‖_F ‖R⁻¹‖_F < ½`` (``σ_max ≤ ‖R‖_F``,
+    ``σ_min ≥ 1/‖R⁻¹‖_F``); ``info[1]`` holds that bound of ``cond(J)`` (inf when not computable).
+    ``defer``: the verdict "stable" (every eigenvalue of ``sym`` below ``−thr``) is certified by a
+    Cholesky factorisation of ``−sym − (thr + δ)·I`` (:func:`_certified_stable`) and the eigenvalues
+    are left to the caller (``info[0]`` = 1: ``ev`` not written; :func:`spectrum` of ``sym`` gives
+    them, bit for bit those of ``_iterate_loops``); otherwise (``info[0]`` = 0) ``ev`` holds them."""
     status, kkt, ep, er, rs, kf, _dx, xn, ev = _iterate_jit(
-        J6, pos, erot, x, refactor, polish_left, flush, False, fact, ci, cf, kz, mask, theta0, vscale, escale
+        J6, pos, erot, x, refactor, polish_left, flush, False, fact, ci, cf, kz, mask, theta0, vscale, escale, True
     )
     if status == CONTINUE or status == POLISH:
         for i in range(xn.shape[0]):
             xout[i] = xn[i]
     elif status == CONVERGED:
+        rr = kf[2]
+        m = rr.shape[0]
+        cond = _cond_bound(rr, m)
+        if not cf[8] * cond < 0.5 and not _full_rank(rr, m, cf[8]):
+            return RANK_FAIL, kkt, ep, er, rs
+        nz = ci[0] - m
+        sym = ev.reshape((nz, nz))
         ws[0][:, :] = kf[0]
         ws[1][:, :] = kf[1]
         ws[2][:, :] = kf[2]
@@ -633,14 +681,168 @@ def _iterate_into(J6, pos, erot, x, refactor, polish_left, flush, fact, ci, cf, 
         ws[5][:] = kf[5]
         ws[6][:, :] = kf[6]
         ws[7][:] = kf[7]
-        ws[8][:] = ev
+        ws[9][:, :] = sym
+        info = ws[10]
+        info[1] = cond
+        if defer and _certified_stable(sym, nz, thr):
+            info[0] = 1.0
+        else:
+            info[0] = 0.0
+            ws[8][:] = np.linalg.eigvalsh(sym)
     return status, kkt, ep, er, rs
 
 
+def _cond_bound(rr, m):
+    """``‖R‖_F ‖R⁻¹‖_F`` (≥ ``σ_max/σ_min``) of the upper triangle of ``R`` (m × m); inf when ``R`` is
+    not finite or has a zero pivot (the caller's test then fails)."""
+    nr = 0.0
+    for i in range(m):
+        for j in range(i, m):
+            nr += rr[i, j] * rr[i, j]
+    ni = 0.0
+    col = np.empty(m)
+    for i in range(m):
+        if rr[i, i] == 0.0:  # (numba raises on a division by zero)
+            return math.inf
+    for c in range(m):  # column c of R⁻¹: R y = e_c
+        for i in range(m - 1, -1, -1):
+            s = 1.0 if i == c else 0.0
+            for j in range(i + 1, m):
+                s -= rr[i, j] * col[j]
+            col[i] = s / rr[i, i]
+            ni += col[i] * col[i]
+    v = math.sqrt(nr) * math.sqrt(ni)
+    return v if math.isfinite(v) else math.inf
+
+
+def _certified_stable(sym, nz, thr):
+    """True when ``A = −sym − (thr + δ)·I`` has a Cholesky factorisation, ``δ`` = :data:`CERT_MARGIN`
+    ``· (‖sym‖_F + thr)``: then every eigenvalue of ``sym`` is below ``−thr − δ + ‖E‖`` with the
+    factorisation's backward error ``‖E‖ ≪ δ``, and those ``dsyevd`` computes are below ``−thr``
+    (False: undecided, the caller computes the eigenvalues)."""
+    fro = 0.0
+    for i in range(nz):
+        for j in range(nz):
+            fro += sym[i, j] * sym[i, j]
+    sh = thr + CERT_MARGIN * (math.sqrt(fro) + thr)
+    lo = np.zeros((nz, nz))
+    for j in range(nz):
+        s = -sym[j, j] - sh
+        for k in range(j):
+            s -= lo[j, k] * lo[j, k]
+        if not s > 0.0:
+            return False
+        dj = math.sqrt(s)
+        lo[j, j] = dj
+        for i in range(j + 1, nz):
+            s = -sym[i, j]
+            for k in range(j):
+                s -= lo[i, k] * lo[j, k]
+            lo[i, j] = s / dj
+    return True
+
+
+def _sym_eigvalsh(sym):
+    """The eigenvalues (ascending) of the symmetric ``sym`` as :func:`_iterate_loops` computes them."""
+    return np.linalg.eigvalsh(sym)
+
+
+def _restore_step(pos, erot, jac6, x, task, free, minv, escale, vscale, pt, lim, max_step, flush, xout):
+    """One step of the least-energy restoration of
+    :meth:`~vjm_pin.solver.equilibrium.EquilibriumSolver._restore` at ``x`` (end position ``pos``,
+    ``erot`` = ``log3(R* Rᵀ)`` or zeros, frame Jacobian ``jac6`` (6, nv)), compiled by :func:`restorer`:
+    the task error ``e``; done (1) when ``max|e / escale| ≤ lim``; else ``δ = M⁻¹Jᵀ(J M⁻¹ Jᵀ)⁻¹ e``
+    (``J`` task rows, free columns; LU with partial pivoting, failing on an exactly zero pivot as
+    ``numpy.linalg.solve``), damped to ``max|δ / vscale| ≤ max_step``, ``xout = x + δ`` (free
+    coordinates; entries below 1e-150 flushed when ``flush``): status 0; -1 when singular or not
+    finite. The same arithmetic as the numpy loop up to the summation order of its products."""
+    m = task.shape[0]
+    n = free.shape[0]
+    e = np.empty(m)
+    for i in range(m):
+        t_ = task[i]
+        e[i] = pt[t_] - pos[t_] if t_ < 3 else erot[t_ - 3]
+    scaled = 0.0
+    for i in range(m):
+        v = abs(e[i] / escale[i])
+        if not v <= scaled:  # NaN propagates
+            scaled = v
+    if scaled <= lim:
+        return 1
+    jz = np.empty((m, n))
+    for i in range(m):
+        for c in range(n):
+            jz[i, c] = jac6[task[i], free[c]]
+    b = np.zeros((m, n))  # J M⁻¹
+    for i in range(m):
+        for k in range(n):
+            v = jz[i, k]
+            for c in range(n):
+                b[i, c] += v * minv[k, c]
+    a = np.zeros((m, m))  # J M⁻¹ Jᵀ
+    for i in range(m):
+        for j in range(m):
+            acc = 0.0
+            for c in range(n):
+                acc += b[i, c] * jz[j, c]
+            a[i, j] = acc
+    y = e.copy()
+    if not _lu_eliminate(a, y, m):  # LU with partial pivoting (dgesv)
+        return -1
+    for i in range(m - 1, -1, -1):
+        acc = y[i]
+        for j in range(i + 1, m):
+            acc -= a[i, j] * y[j]
+        y[i] = acc / a[i, i]
+    delta = np.zeros(n)  # (M⁻¹ Jᵀ) y
+    for k in range(n):
+        acc = 0.0
+        for i in range(m):
+            s_ = 0.0
+            for c in range(n):
+                s_ += minv[k, c] * jz[i, c]
+            acc += s_ * y[i]
+        delta[k] = acc
+    big = 0.0
+    for c in range(n):
+        if not math.isfinite(delta[c]):
+            return -1
+        big = max(big, abs(delta[c] / vscale[c]))
+    if big > max_step:
+        f = max_step / big
+        for c in range(n):
+            delta[c] *= f
+    for i in range(x.shape[0]):
+        xout[i] = x[i]
+    for c in range(n):
+        xout[free[c]] += delta[c]
+    if flush:
+        for i in range(xout.shape[0]):
+            if abs(xout[i]) < 1e-150:
+                xout[i] = 0.0
+    return 0
+
+
+_restorer = None  # the compiled _restore_step once built, False when numba is unavailable
+
+
+def restorer():
+    """The compiled :func:`_restore_step`, or None when numba cannot be imported."""
+    global _restorer
+    if _restorer is None:
+        if not _load_compiled():
+            _restorer = False
+        else:
+            import numba
+
+            _restorer = numba.njit(cache=True, nogil=True)(_restore_step)
+    return _restorer or None
+
+
 #: The njit helpers of :func:`_iterate_loops`, compiled (in this order) by :func:`_load_compiled`;
-#: the chain kernel (:mod:`vjm_pin.solver.chain_kernel`) calls the same ones.
+#: the chain kernel (:mod:`vjm_pin.solver.chain_kernel`) calls the same ones (not ``_iterate_body``).
 _HELPERS = ("_apply_qt", "_qr_t", "_back_substitute", "_multiplier", "_hessian", "_progress", "_full_rank", "_reflect_rows",
-            "_step_loops", "_moved_loops")
+            "_lu_eliminate", "_step_loops", "_moved_loops", "_iterate_body")
 _lean = None  # the compiled _iterate_into once built, False when numba is unavailable
 
 
@@ -656,16 +858,27 @@ def lean():
         else:
             import numba
 
-            globals()["_iterate_jit"] = disp
-            _lean = numba.njit(cache=True, nogil=True)(_iterate_into)
+            g = globals()
+            opts = {"cache": True, "nogil": True}
+            g["_iterate_jit"] = g["_iterate_body"]  # (compiled by _load_compiled)
+            g["_cond_bound"] = numba.njit(**opts)(_cond_bound)
+            g["_certified_stable"] = numba.njit(**opts)(_certified_stable)
+            g["_eig_jit"] = numba.njit(**opts)(_sym_eigvalsh)
+            _lean = numba.njit(**opts)(_iterate_into)
     return _lean or None
+
+
+def spectrum(sym):
+    """The eigenvalues (ascending) of the matrix of eq. (23) ``sym`` kept by :func:`_iterate_into` (a
+    deferred verdict): compiled, bit for bit those :func:`_iterate_loops` returns."""
+    return _eig_jit(sym)
 
 
 def workspace(ci, nq: int) -> tuple:
     """Fresh buffers ``(xout, ws)`` of :func:`_iterate_into` for the constants ``ci`` (:func:`pack`)."""
     n, m = int(ci[0]), int(ci[2])
     ws = (np.empty((m, n)), np.empty((m + 1, n)), np.empty((m, m)), np.empty(m), np.empty(n), np.empty(n),
-          np.empty((n, n)), np.empty(6), np.empty(n - m))
+          np.empty((n, n)), np.empty(6), np.empty(n - m), np.empty((n - m, n - m)), np.zeros(2))
     return np.empty(nq), ws
 
 

@@ -85,6 +85,38 @@ class DeferredStability(StabilityResult):
         return (StabilityResult, (self.stable, np.array(self.eigenvalues), self.null_dim, self.tolerance))
 
 
+class SpectrumLater(StabilityResult):
+    """A :class:`StabilityResult` whose verdict is known now and whose eigenvalues are computed from
+    the kept matrix of eq. (23) when first read.
+
+    The serial solver's compiled kernel certifies "stable" with a Cholesky factorisation of the
+    matrix shifted past the threshold (:func:`vjm_pin.solver.kernel._iterate_into`); a warm-started
+    solve of a curve seldom reads the spectrum. ``eigenvalues`` (all ``d``, ascending) and
+    ``margin`` are ``spectrum(matrix)`` (the same LAPACK call as the eager verdict: the same numbers)
+    the first time either is read. Pickled as a plain :class:`StabilityResult`, spectrum included.
+    """
+
+    def __init__(self, stable: bool, null_dim: int, tolerance: float, matrix: np.ndarray, spectrum):
+        object.__setattr__(self, "stable", bool(stable))
+        object.__setattr__(self, "null_dim", int(null_dim))
+        object.__setattr__(self, "tolerance", float(tolerance))
+        object.__setattr__(self, "_matrix", matrix)  # (d, d), no one else writes it
+        object.__setattr__(self, "_spectrum_of", spectrum)
+        object.__setattr__(self, "_spectrum", None)
+
+    @property
+    def eigenvalues(self) -> np.ndarray:
+        ev = self._spectrum
+        if ev is None:
+            ev = self._spectrum_of(self._matrix)
+            object.__setattr__(self, "_spectrum", ev)
+            object.__setattr__(self, "_matrix", None)
+        return ev
+
+    def __reduce__(self):
+        return (StabilityResult, (self.stable, np.array(self.eigenvalues), self.null_dim, self.tolerance))
+
+
 def null_space(J_theta: np.ndarray, J_q: np.ndarray, rank_tol: float = RANK_TOL) -> np.ndarray:
     """Orthonormal basis (nθ+nq, d) of the null space of ``[J_θ J_q]`` by SVD (eq. 20–21).
 

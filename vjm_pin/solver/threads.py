@@ -9,7 +9,9 @@ machine (on an idle one, one thread costs ~15 %; docs/performance.md). The publi
 ``solve_wrench`` / ``solve_mixed`` / ``verify``, ``trace_curve``, ``loaded_stiffness``, the
 map worker) are therefore wrapped by :func:`one_blas_thread`: both pools are limited to one
 thread for the duration of the call and restored afterwards. Only the library's own calls
-are affected, not the user's environment or their other numpy work.
+are affected, not the user's environment or their other numpy work. (``EquilibriumSolver.solve``'s
+lean warm-start path skips the limit for models of order ≤ 48, where OpenBLAS runs one thread
+anyway: see :mod:`vjm_pin.solver.equilibrium`.)
 
 The limit is taken once per outermost public call (each library's ``set_num_threads`` through
 a cached ``threadpoolctl.ThreadpoolController``, restored on exit); nested calls (``solve_wrench`` → ``solve_mixed`` →
