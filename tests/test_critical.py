@@ -499,3 +499,205 @@ def test_orthoglide_agrees_with_trace_curve():
     assert side[0.99].stable_end_held and not side[1.01].stable_end_held
     forces = [r.direction @ side[f].wrench for f in (0.99, 1.01)]
     assert forces[0] < r.force < forces[1]
+
+
+# --------------------------------------------------------------------------- long chains (compiled)
+# With VJM_PIN_JIT=1 a chain of ≥ POINT_MIN_N free coordinates solves the eigenproblems of the
+# start, of the linearised estimate and of the mode by the O(n) chain algebra
+# (vjm_pin/solver/chain_eigen.py); checked here against the dense routines the numpy path runs.
+
+
+def _long_column(k=4, posture="s"):
+    from vjm_pin.model.paper_models import PAPER_BEAM, paper_model_urdf
+
+    return load_vjm(paper_model_urdf("c", posture, beam=PAPER_BEAM, subdivide=k))
+
+
+def _chain_setup(vm, d=X):
+    """A tracer as critical_load builds it, its start point (chain path) and the dense problem data."""
+    from vjm_pin.analysis import critical as crit
+    from vjm_pin.analysis.curve import _direction, _Tracer
+    from vjm_pin.model.task import task_vector
+
+    sol = EquilibriumSolver(vm)
+    dd = _direction(vm, task_vector(d, vm.task, "direction", "m"))
+    tr = _Tracer(vm, dd, sol.length_scale, sol, 1e-4)
+    assert crit._chain(tr), "the compiled chain path applies to this model"
+    return crit, sol, tr
+
+
+def _dense_eigs(vm, x, wrench, rows=None):
+    b = blocks_at(vm, x, wrench)
+    z = null_space(b.J_theta, b.J_q) if rows is None else null_space(rows @ b.J_theta, rows @ b.J_q)
+    return np.linalg.eigh(reduced_matrix(b, z)), z  # eigenvalues of eq. (23)'s matrix: −λ of K − H
+
+
+@pytest.fixture
+def jit_on(monkeypatch):
+    pytest.importorskip("numba")
+    monkeypatch.setenv("VJM_PIN_JIT", "1")
+    return monkeypatch
+
+
+def test_chain_eigenproblems_match_dense_ones(jit_on):
+    """HeldEigen (vjm_pin.solver.chain_eigen) at a loaded configuration of the k = 4 column, end
+    held in every task row and in the rows orthogonal to d: the smallest eigenvalue of
+    ``Zᵀ sym(K − H) Z`` and its eigenvector, the Sturm counts at shifts around the spectrum's
+    low end, the Rayleigh quotient, and the pencil's largest root (against the dense generalized
+    eigenproblem of linearised_load)."""
+    from vjm_pin.solver.chain_eigen import held_eigen
+
+    vm = _long_column(4)
+    crit, sol, tr = _chain_setup(vm)
+    eq = sol.solve(2e-5 * np.array([-1.0, 0, 0, 0, 0, 0]))  # compressed, before buckling
+    assert eq.converged
+    jac = tr.kin.evaluate(eq.x, hessian=False).jacobian
+    for rows in (None, tr.P):
+        he = held_eigen(tr.kernel, tr.mask, jac, rows)
+        assert he is not None
+        (ev, u), z = _dense_eigs(vm, eq.x, eq.wrench, rows)
+        lam, y = he.smallest(eq.wrench)
+        scale = np.linalg.norm(vm.K_theta, 2)
+        assert lam == pytest.approx(-ev[-1], rel=1e-9, abs=1e-12 * scale)
+        w = he.free_vector(y)
+        assert abs(float(w @ (z @ u[:, -1]))) == pytest.approx(1.0, abs=1e-8)
+        assert he.rayleigh(eq.wrench, y) == pytest.approx(lam, rel=1e-9)
+        lam_d, y_d = he.smallest_definite(eq.wrench)  # positive definite before buckling
+        assert (
+            lam > 0
+            and lam_d == pytest.approx(lam, rel=1e-9)
+            and abs(y_d @ y) == pytest.approx(1.0, abs=1e-6)
+        )
+        for sigma in (0.5 * lam, 0.5 * (-ev[-1] - ev[-2]), 0.5 * (-ev[-3] - ev[-4])):
+            assert he.count_below(eq.wrench, sigma) == int(np.sum(-ev < sigma))
+        # warm-started from a perturbed vector: the same eigenpair
+        lam2, y2 = he.smallest(eq.wrench, y + 1e-3 * np.sin(np.arange(he.n)))
+        assert lam2 == pytest.approx(lam, rel=1e-10) and abs(y2 @ y) == pytest.approx(1.0, abs=1e-9)
+    # the pencil at the unloaded start against the dense linearised estimate
+    with jit_on.context() as mp:
+        mp.setenv("VJM_PIN_JIT", "0")
+        tr0 = crit._Tracer(vm, tr.d, sol.length_scale, EquilibriumSolver(vm), 1e-4)
+        p0 = crit._start(vm, tr0, tr0.solver, tr0.d)
+        dense = crit.linearised_load(tr0, p0)
+    he = held_eigen(tr.kernel, tr.mask, tr.kin.evaluate(p0.eq.x, hessian=False).jacobian, tr.P)
+    w1 = p0.tan[1] / p0.k
+    start = he.smallest(p0.eq.wrench)[1]  # μ's eigenvector at the start (as critical_load starts)
+    t, y, certified = he.pencil(p0.eq.wrench, w1, start, cert=1e-10)
+    assert certified and t == pytest.approx(dense, rel=1e-10)
+    assert he.count_below(p0.eq.wrench + 0.999 * t * w1) == 0  # no root before it
+    assert he.count_below(p0.eq.wrench + 1.001 * t * w1) == 1  # one just after it
+
+
+@pytest.mark.parametrize(
+    "posture, d", [("s", X), ("z", X), ("s", [-1.0, 0.05, 0.0])], ids=["s", "z", "s-oblique"]
+)
+def test_chain_path_gives_the_dense_path_result(jit_on, posture, d):
+    """critical_load on the k = 4 column with the compiled chain kernels against the numpy path:
+    force, deflection, linearised estimate, kind and mode (the straight column, the bent Z
+    posture, an oblique push); the reference's eq. (23) verdict; and against trace_curve's first
+    critical point (straight column)."""
+    from vjm_pin.analysis import critical as crit
+    from vjm_pin.solver import chain_eigen
+
+    vm = _long_column(4, posture)
+    calls = []
+    orig = chain_eigen.HeldEigen.smallest
+
+    def spy(self, *a, **k):
+        got = orig(self, *a, **k)
+        calls.append(got is not None)
+        return got
+
+    jit_on.setattr(chain_eigen.HeldEigen, "smallest", spy)
+    lin = []
+    orig_lin = crit._linearised_chain
+    jit_on.setattr(crit, "_linearised_chain", lambda *a: lin.append(orig_lin(*a)) or lin[-1])
+    fast = critical_load(vm, d)
+    assert calls and all(calls), "the chain eigenproblems ran"
+    assert len(lin) == 1 and lin[0] is not None, "the linearised estimate by the chain algebra"
+    with jit_on.context() as mp:
+        mp.setenv("VJM_PIN_JIT", "0")
+        n_before = len(calls)
+        dense = critical_load(vm, d)
+        assert len(calls) == n_before  # the numpy path solves no chain eigenproblem
+    assert fast.converged and dense.converged and fast.kind == dense.kind == "bifurcation"
+    assert fast.check(1e-7) and fast.iterations <= dense.iterations
+    # both located to rtol = 1e-7 (the chain path may start nearer: _refined_start)
+    assert fast.force == pytest.approx(dense.force, rel=1e-7)
+    assert fast.deflection == pytest.approx(dense.deflection, rel=1e-6)
+    assert fast.estimate == pytest.approx(dense.estimate, rel=1e-9)
+    assert abs(float(fast.mode @ dense.mode)) == pytest.approx(1.0, abs=1e-8)
+    assert fast.mode[np.argmax(np.abs(fast.mode))] > 0
+    if posture == "s" and d is X:
+        cp = trace_curve(vm, X, 6e-4, steps=4).critical[0]
+        assert fast.force == pytest.approx(cp.force, rel=1e-7)
+    # the unloaded reference: the chain's eq. (23) verdict and largest eigenvalue, the dense spectrum
+    _, sol, tr = _chain_setup(vm)
+    ref = crit._reference_chain(vm, sol, tr)
+    (ev, _), z = _dense_eigs(vm, ref.x, ref.wrench)
+    assert ref.stability.stable and ref.stability.null_dim == z.shape[1]
+    assert -ref.stability.margin == pytest.approx(ev[-1], rel=1e-9)
+    np.testing.assert_allclose(ref.stability.eigenvalues, ev, rtol=1e-9, atol=1e-12 * abs(ev).max())
+
+
+@pytest.mark.parametrize("broken", ["pencil", "uncertified"])
+def test_linearised_chain_newton_when_the_pencil_gives_way(jit_on, broken):
+    """Where the pencil's power iteration gives no certified root (no quotient, or a Sturm count
+    that is not reliable) the linearised estimate comes from Newton on the certified smallest
+    eigenvalue: the same value as the dense generalized eigenproblem."""
+    from vjm_pin.solver import chain_eigen
+
+    vm = _long_column(4)
+    crit, sol, tr = _chain_setup(vm)
+    p0 = crit._start(vm, tr, sol, tr.d)
+    with jit_on.context() as mp:
+        mp.setenv("VJM_PIN_JIT", "0")
+        tr0 = crit._Tracer(vm, tr.d, sol.length_scale, EquilibriumSolver(vm), 1e-4)
+        dense = crit.linearised_load(tr0, crit._start(vm, tr0, tr0.solver, tr0.d))
+    orig = chain_eigen.HeldEigen.pencil
+    if broken == "pencil":
+        jit_on.setattr(chain_eigen.HeldEigen, "pencil", lambda self, *a, **k: None)
+    else:  # a quotient, not certified (as where the Sturm count is not reliable)
+        jit_on.setattr(
+            chain_eigen.HeldEigen,
+            "pencil",
+            lambda self, *a, **k: orig(self, *a, **k)[:2] + (False,),
+        )
+    got = crit._linearised_chain(tr, p0, p0.tan[1] / p0.k)
+    assert got is not None and got == pytest.approx(dense, rel=1e-10)
+
+
+def test_refined_start_one_confirming_evaluation(jit_on):
+    """The straight k = 4 column: the frozen-geometry estimate repeated at its tangent prediction
+    (_refined_start) puts the first equilibrium within rtol of the root, on the stable side: one
+    evaluation, verified (μ < 0 there, one more Newton step below rtol), the force within rtol of
+    the numpy path's (two evaluations) and of re-solved equilibria's sign change of μ. With a
+    tolerance the refined estimate cannot promise (rtol = 1e-10) the search starts at the
+    linearised estimate as the numpy path does, and agrees with it to that tolerance."""
+    from vjm_pin.analysis import critical as crit
+
+    vm = _long_column(4)
+    fast = critical_load(vm, X)
+    with jit_on.context() as mp:
+        mp.setenv("VJM_PIN_JIT", "0")
+        dense = critical_load(vm, X)
+        tight_dense = critical_load(vm, X, rtol=1e-10)
+    assert fast.iterations == 1 < dense.iterations
+    assert fast.converged and fast.check(1e-7) and fast.margin < 0  # the stable side
+    assert fast.force == pytest.approx(dense.force, rel=1e-7)
+    assert fast.force <= dense.force * (1 + 1e-12)
+    # μ changes sign between re-solved equilibria just before and after (1e-6 relative)
+    sol = EquilibriumSolver(vm, follow_stable=False, restarts=0)
+    d6 = np.array([-1.0, 0, 0, 0, 0, 0])
+    ms = []
+    for f in (1 - 1e-6, 1 + 1e-6):
+        eq = sol.solve(f * fast.deflection * d6, x0=fast.x, wrench0=fast.wrench)
+        assert eq.converged
+        ms.append(_margin(vm, eq, d6))
+    assert ms[0] < 0 < ms[1]
+    calls = []
+    orig = crit._refined_start
+    jit_on.setattr(crit, "_refined_start", lambda *a: calls.append(orig(*a)) or calls[-1])
+    tight = critical_load(vm, X, rtol=1e-10)
+    assert calls == [None]
+    assert tight.force == pytest.approx(tight_dense.force, rel=1e-10)

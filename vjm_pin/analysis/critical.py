@@ -48,6 +48,16 @@ The buckling mode is the unit eigenvector of the critical matrix at the critical
 (end held) at a bifurcation, the force-control matrix (``μ``'s) at a limit or imperfect point,
 by inverse iteration (one Cholesky).
 
+Where the tracer's points come from the compiled O(n) chain kernel (a long serial chain,
+``VJM_PIN_JIT`` not 0: :func:`_chain`), the eigenproblems of steps 1–2 and of the mode use the
+same chain algebra (:mod:`vjm_pin.solver.chain_eigen`, Sturm-certified) instead of dense ones:
+the reference's eq. (23) (:func:`_reference_chain`), the estimate (:func:`_linearised_chain`:
+the pencil's power iteration bounded by a Sturm count, else Newton on the smallest eigenvalue)
+and the mode (:func:`_mode_chain`); the dense routines decide wherever the chain algebra declines.
+There the first evaluation may also start nearer the root (:func:`_refined_start`: the
+frozen-geometry problem repeated at the estimate's tangent prediction, where the path is nearly
+linear), so that one verified equilibrium can meet the tolerance of step 4.
+
 Mechanisms
 ----------
 Models with loop closures, dead loads, gravity, ``free=True`` or a
@@ -83,19 +93,25 @@ from vjm_pin.analysis.curve import (
     _max_eig,
     _mechanism_solver,
     _reference_equilibrium,
+    _reference_result,
+    _reference_x,
     _Tracer,
     _unloaded,
 )
 from vjm_pin.analysis.mechanism_curve import MechanismTracer, check_free_direction
+from vjm_pin.analysis.point_kernel import use_compiled
 from vjm_pin.exceptions import InputError, NoCriticalPoint
 from vjm_pin.kinematics.dead_loads import Load
 from vjm_pin.model.format import VjmModel
 from vjm_pin.model.task import task_vector
+from vjm_pin.solver import chain_kernel as _chain_kernel
+from vjm_pin.solver.chain_eigen import held_eigen, remember, remembered
 from vjm_pin.solver.equilibrium import EquilibriumResult, EquilibriumSolver
 from vjm_pin.solver.lapack import lapack as _lapack
 from vjm_pin.solver.lapack import solve_triangular
 from vjm_pin.solver.mechanism import MechanismSolver, _null_basis
 from vjm_pin.solver.stability import (
+    DeferredStability,
     check_stability_held,
     null_space,
     spectral_norm,
@@ -240,6 +256,10 @@ def linearised_load(tr: _Tracer, p0) -> float | None:
     t = tr.tangent(p0)
     if t is None or not (np.isfinite(p0.k) and p0.k > 0):
         return None
+    if _chain(tr):
+        df = _linearised_chain(tr, p0, t[1] / p0.k)
+        if df is not None:
+            return df
     x0, w0 = p0.eq.x, p0.eq.wrench
     b0 = tr.blocks(x0, w0)
     _, v = _basis(tr, b0)
@@ -272,6 +292,10 @@ def _mode(tr: _Tracer, c, held: bool) -> np.ndarray:
     (``held``) or of the force-control matrix (its eigenvalue is ``c.mu``, the largest)."""
     if isinstance(tr, MechanismTracer):
         return _mode_mechanism(tr, c, held)
+    if _chain(tr):
+        out = _mode_chain(tr, c, held)
+        if out is not None:
+            return out
     b = tr.blocks(c.eq.x, c.eq.wrench)
     z, v = _basis(tr, b)
     basis = z if held and z.shape[1] else v
@@ -284,6 +308,198 @@ def _mode(tr: _Tracer, c, held: bool) -> np.ndarray:
     w = basis @ u
     w /= np.linalg.norm(w)
     i = int(np.argmax(np.abs(w)))
+    out[tr.free] = w if w[i] >= 0 else -w
+    return out
+
+
+# --------------------------------------------------------------------------- long chains
+#: Newton steps of :func:`_linearised_chain` before it gives way to the dense eigenproblem.
+LIN_MAX_NEWTON = 12
+#: :func:`_linearised_chain` stops when its last Newton step, or the error its quadratic
+#: convergence predicts for the next (``δₖ³/δₖ₋₁²``), is below this × the increment (relative).
+LIN_RTOL = 1e-10
+#: The power iteration's root is accepted when a Sturm count this far (relative) short of it
+#: finds no negative eigenvalue: it is then located to this.
+LIN_CERT = 1e-10
+
+
+def _chain(tr) -> bool:
+    """Whether the tracer's points are those of the compiled O(n) chain kernel (a long serial
+    chain, ``VJM_PIN_JIT`` not 0): then the eigenproblems of steps 1–2 and of the mode are solved
+    by the same algebra (:mod:`vjm_pin.solver.chain_eigen`) instead of dense ones."""
+    return (
+        not isinstance(tr, MechanismTracer)
+        and tr.kernel is not None
+        and tr.mask is not None
+        and tr.kernel.n >= _chain_kernel.POINT_MIN_N
+        and use_compiled(0)
+    )
+
+
+def _jacobian(tr, x) -> np.ndarray:
+    """(6, nv) frame Jacobian (world axes) at ``x`` (the tracer's kinematics, shared state)."""
+    return tr.kin.evaluate(x, hessian=False).jacobian
+
+
+def _reference_chain(vm, solver, tr) -> EquilibriumResult | None:
+    """:func:`~vjm_pin.analysis.curve._reference_equilibrium` (the unloaded reference as a
+    converged equilibrium, or None with a preloaded spring) with its eq. (23) verdict by the chain
+    kernel (its largest eigenvalue, certified; the spectrum on demand:
+    :class:`~vjm_pin.solver.stability.DeferredStability`); the dense one where the chain algebra
+    declines. Its eigenvector starts the point kernel's ``μ`` at the start (a warm start only)."""
+    x = _reference_x(vm)
+    if x is None:
+        return None
+    w = np.zeros(6)
+    he = held_eigen(tr.kernel, tr.mask, _jacobian(tr, x))
+    got = None
+    if he is not None:
+        got = he.smallest_definite(w) or he.smallest(w)
+    if got is None:
+        return _reference_equilibrium(vm, solver, tr.kin)
+    remember(tr.kernel, got[1])
+    largest = -got[0]  # the largest eigenvalue of eq. (23)
+    kin = tr.kin
+
+    def blocks():
+        from vjm_pin.solver import blocks_at
+
+        return blocks_at(vm, x, w, kin)
+
+    return _reference_result(vm, solver, x, DeferredStability(largest < -tr.thr, largest, he.n - he.m, tr.thr, blocks))
+
+
+def _linearised_chain(tr, p0, w1) -> float | None:
+    """:func:`linearised_load` by the chain algebra: the smallest ``ΔF > 0`` where ``λ₁(ΔF)``,
+    the smallest eigenvalue of ``Vᵀ sym(A − ΔF·B) V`` (``A = K − H₀``, ``B = H(w₁)``, ``w₁`` the
+    wrench per unit force along d, eq. 29), reaches zero. ``λ₁`` is concave in ``ΔF`` (the
+    smallest eigenvalue of an affine family) and positive at 0 (``μ₀ < 0``): the root is unique and
+    the generalized Rayleigh quotient ``yᵀAy / yᵀBy`` of any ``y`` of the null space with
+    ``yᵀBy > 0`` bounds it from above (it is the quotient's minimum, ``1/ν_max`` of the dense
+    routine).
+
+    First the pencil's power iteration (:meth:`~vjm_pin.solver.chain_eigen.HeldEigen.pencil`,
+    from ``μ``'s eigenvector at ``p0``, the point kernel's) to a quotient ``t``; accepted when a
+    Sturm count finds ``λ₁ > 0`` at ``(1 − LIN_CERT)·t`` (the root then lies in that interval).
+    Else Newton on ``λ₁`` from the quotient of the last vector: ``dλ₁/dΔF = −yᵀBy`` at its unit
+    eigenvector, so each step is the quotient of the eigenvector at the last ``ΔF`` (``λ₁`` and
+    ``y`` certified by the chain kernel's Sturm counts), decreasing to the root (Newton on a
+    concave function from above), to :data:`LIN_RTOL`. None (the dense eigenproblem decides) where
+    the chain algebra declines, a vector does not load the mode (``yᵀBy ≤ 0``) or the steps do not
+    settle in :data:`LIN_MAX_NEWTON`. The last vector starts the next eigenproblems of the point
+    kernel and of the corrector (a warm start only)."""
+    w0 = p0.eq.wrench
+    he = held_eigen(tr.kernel, tr.mask, _jacobian(tr, p0.eq.x), tr.P)
+    if he is None:
+        return None
+    y = remembered(tr.kernel, he.n)
+    if y is None:
+        got = he.smallest(w0)
+        if got is None:
+            return None
+        y = got[1]
+    w0 = np.asarray(w0, float)
+    w1 = np.asarray(w1, float)
+    # power iteration on the pencil: its quotient bounds the root from above; no eigenvalue
+    # below zero just short of it (a Sturm count) bounds it from below, to LIN_CERT (relative)
+    pen = he.pencil(w0, w1, y, cert=LIN_CERT)
+    if pen is not None:
+        y = pen[1]
+        if pen[2]:
+            _warm(tr, y)
+            return float(pen[0])
+    t, step = 0.0, None
+    for _ in range(LIN_MAX_NEWTON):
+        r0 = he.rayleigh(w0, y)
+        g = he.rayleigh(w0 + w1, y) - r0  # −yᵀH(w₁)y
+        if not (g < 0 and r0 > 0 and np.isfinite(r0 / g)):
+            return None
+        tn = -r0 / g
+        dt = abs(tn - t)
+        if dt <= LIN_RTOL * tn or (
+            step is not None and dt < 0.1 * step and dt**3 <= LIN_RTOL * tn * step**2
+        ):
+            _warm(tr, y)
+            return float(tn)
+        got = he.smallest(w0 + tn * w1, y)
+        if got is None:
+            return None
+        y, t, step = got[1], tn, dt
+    return None
+
+
+#: :func:`_refined_start` applies when the second increment is at most this × the first (a
+#: nearly linear path before the critical point) ...
+REFINE_RATIO = 1e-3
+#: ... and aims this × its error model ``(ΔF₂/ΔF₁)²·ΔF₁`` short of the refined estimate (the
+#: stable side), when that stays within ``rtol/2`` of it.
+REFINE_MARGIN = 2.0
+
+
+def _refined_start(tr, p0, df, rtol, max_deflection) -> float | None:
+    """A first deflection to evaluate nearer the critical point than the linearised estimate
+    (chain path): the same frozen-geometry problem again at the tangent prediction of the estimate
+    (``x₀ + s₁·δx``, ``F₀ + ΔF₁·w₁``, eq. 29), whose increment ``ΔF₂`` corrects the estimate for
+    the geometry change along the path. Used where the path is nearly linear there
+    (``0 ≤ ΔF₂ ≤ REFINE_RATIO·ΔF₁``, the pencil's root certified by a Sturm count): the error of
+    ``ΔF₁ + ΔF₂`` is then of order ``(ΔF₂/ΔF₁)²·ΔF₁``; the start aims :data:`REFINE_MARGIN` × that
+    short of it, on the stable side (a Sturm count: the refined problem still definite there), when
+    the whole stays within ``rtol/2`` (so that one verified equilibrium there may already meet the
+    tolerance); else None (the estimate's deflection).
+    Only a start: the search verifies the point as always (μ, its rate, the stopping rule)."""
+    t = tr.tangent(p0)
+    if t is None or not (np.isfinite(p0.k) and p0.k > 0 and df > 0):
+        return None
+    w1 = t[1] / p0.k
+    s1 = p0.s + df / p0.k
+    x1 = p0.eq.x + (s1 - p0.s) * t[0]
+    he = held_eigen(tr.kernel, tr.mask, _jacobian(tr, x1), tr.P)
+    y = remembered(tr.kernel, he.n) if he is not None else None
+    if he is None or y is None:
+        return None
+    w1x = p0.eq.wrench + df * w1
+    pen = he.pencil(w1x, w1, y, atol=1e-10 * df)
+    if pen is None:
+        return None
+    df2 = pen[0]
+    r = df2 / df
+    if not 0 <= r <= REFINE_RATIO:
+        return None
+    err = r * r * df
+    f = abs(p0.force + df + df2)
+    if (REFINE_MARGIN + 1.0) * err > 0.5 * rtol * f:
+        return None
+    # the root of the refined problem lies above the start (a Sturm count there: still definite)
+    if he.count_below(w1x + (df2 - REFINE_MARGIN * err) * w1) != 0:
+        return None
+    return s1 + (df2 - REFINE_MARGIN * err) / p0.k
+
+
+def _warm(tr, y) -> None:
+    """Start the next eigenproblems of the point kernel (``μ``) and of the corrector (eq. 23)
+    from ``y`` (chain order; a warm start only: their results are certified as before)."""
+    remember(tr.kernel, y)
+    try:  # the corrector's kernel constants (EquilibriumSolver._corrector_context): its eq. (23)
+        key = tr._corr[1][0]
+    except (AttributeError, TypeError, IndexError, KeyError):
+        return
+    if isinstance(key, np.ndarray):
+        remember(key, y)
+
+
+def _mode_chain(tr, c, held: bool) -> np.ndarray | None:
+    """:func:`_mode` by the chain algebra (the eigenvector of ``λ₁``, certified, started from the
+    point kernel's last eigenvector), or None where it declines."""
+    he = held_eigen(tr.kernel, tr.mask, _jacobian(tr, c.eq.x), None if held else tr.P)
+    if he is None:
+        return None
+    got = he.smallest(np.asarray(c.eq.wrench, float), remembered(tr.kernel, he.n))
+    if got is None:
+        return None
+    w = he.free_vector(got[1])
+    w /= np.linalg.norm(w)
+    i = int(np.argmax(np.abs(w)))
+    out = np.zeros_like(c.eq.x)
     out[tr.free] = w if w[i] >= 0 else -w
     return out
 
@@ -584,7 +800,10 @@ def _start(vm, tr: _Tracer, solver: EquilibriumSolver, d: np.ndarray):
     Where the reference is a stable unloaded equilibrium (no spring preload; eq. 23 negative
     definite) ``solver.solve(0)`` returns it after 0 iterations, so it is taken directly (the
     rigidity test of ``_unloaded`` is then ``k = dᵀK_C d`` infinite at that point)."""
-    probe = _reference_equilibrium(vm, solver, tr.kin)
+    if _chain(tr):
+        probe = _reference_chain(vm, solver, tr)
+    else:
+        probe = _reference_equilibrium(vm, solver, tr.kin)
     if probe is not None:
         p0 = tr.point(probe, 0.0)
         if np.isinf(p0.k) or (np.isfinite(p0.k) and p0.lam < -tr.thr):
@@ -680,13 +899,18 @@ def critical_load(
             f"(force-control margin {-p0.mu:.3g}): no critical point to approach",
             max_deflection=0.0,
         )
-    return _search_from(vm, tr, p0, linearised_load(tr, p0), max_deflection, r0, rtol, max_iter)
+    df = linearised_load(tr, p0)
+    start = (
+        _refined_start(tr, p0, df, rtol, max_deflection) if df is not None and _chain(tr) else None
+    )
+    return _search_from(vm, tr, p0, df, max_deflection, r0, rtol, max_iter, start)
 
 
-def _search_from(vm, tr, p0, df, max_deflection, r0, rtol, max_iter) -> CriticalLoad:
+def _search_from(vm, tr, p0, df, max_deflection, r0, rtol, max_iter, start=None) -> CriticalLoad:
     """Steps 3–4 of the module docstring from the start ``p0`` (``μ < 0``, finite stiffness)
     with the load increment ``df`` of the linearised estimate (or None): serial and mechanism
-    tracers alike."""
+    tracers alike. ``start``: the first deflection to evaluate instead of the estimate's
+    (:func:`_refined_start`); the search range is the estimate's either way."""
     rotation = bool(np.any(tr.d[3:]))
     s_est = p0.s + df / p0.k if df is not None else float("nan")
     if max_deflection is not None:
@@ -698,6 +922,8 @@ def _search_from(vm, tr, p0, df, max_deflection, r0, rtol, max_iter) -> Critical
     tr.dmu(p0)
     lo, ev, c = p0, None, None
     s = s_est if np.isfinite(s_est) and 0 < s_est else s_max / 16
+    if start is not None and p0.s < start < s_max:
+        s = start
     while search.n < search.max_iter:
         ev = search.bracket(lo, s) if ev is None else ev
         if ev is None:
@@ -780,7 +1006,9 @@ def _result(vm, tr, c, kind, df, p0, search, ok) -> CriticalLoad:
     loc = abs(c.mu / g_loc) * k / f if np.isfinite(g_loc) else search.location
     if kind == "imperfect":
         loc = 0.0  # an extremum of μ, located by the tracer's own search (locate_max)
-    scale = spectral_norm(vm.K_theta) if vm.K_theta.size else 1.0
+    scale = getattr(tr, "k_norm", None)  # ‖K_θ‖₂ as the tracer took it
+    if scale is None:
+        scale = spectral_norm(vm.K_theta) if vm.K_theta.size else 1.0
     res = {
         "location": float(loc),
         "margin": float(abs(c.mu) / scale),

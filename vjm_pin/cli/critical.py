@@ -129,7 +129,8 @@ def _text(vm, r, loads=(), gravity=None, free=False) -> str:
         f"{vm.name}: critical load {load} along {d} ({r.kind}) at deflection {dv:.8g} {du}",
         (
             f"  linearised estimate {r.estimate:.8g} {'N·m' if rot else 'N'}; located to "
-            f"{r.residuals['location']:.1e} (relative) in {r.iterations} equilibrium evaluations"
+            f"{r.residuals['location']:.1e} (relative) in {r.iterations} equilibrium "
+            f"evaluation{'' if r.iterations == 1 else 's'}"
         ),
     ]
     if free:
@@ -170,7 +171,9 @@ def run(args) -> int:
         return 3
     unit = "N·m" if np.any(r.direction[3:]) else "N"
     summary(
-        args, f"{vm.name}: {r.kind} at {r.force:.6g} {unit}, {r.iterations} equilibrium evaluations"
+        args,
+        f"{vm.name}: {r.kind} at {r.force:.6g} {unit}, {r.iterations} equilibrium "
+        f"evaluation{'' if r.iterations == 1 else 's'}",
     )
     if args.json:
         body = critical_dict(
