@@ -13,20 +13,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tests.columns import COMPRESSION, max_deflection
 from vjm_pin.exceptions import InputError
-from vjm_pin.model.paper_models import PAPER_BEAM
 from vjm_pin.model.registry import resolve_model
 from vjm_pin.solver import EquilibriumSolver
-
-COMPRESSION = np.array([-1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
-
-
-def _max_deflection():
-    """6 × the column's axial shortening at its Euler load (well past buckling), m."""
-    a = PAPER_BEAM["a"] * PAPER_BEAM["b"]
-    i_weak = PAPER_BEAM["b"] * PAPER_BEAM["a"] ** 3 / 12.0
-    p_euler = np.pi**2 * PAPER_BEAM["E"] * i_weak / 3.0**2
-    return 6.0 * p_euler * 3.0 / (PAPER_BEAM["E"] * a)
 
 
 def _ur5():
@@ -66,7 +56,7 @@ def _assert_same(a, b):
 
 CASES = {
     # through the buckling of the straight column: a fallback to the safeguarded path and an escape
-    "model-c": (lambda: resolve_model("paper-c-s"), COMPRESSION, _max_deflection(), 30),
+    "model-c": (lambda: resolve_model("paper-c-s"), COMPRESSION, max_deflection(), 30),
     "ur5": (_ur5, np.array([0.0, 0.0, -1.0, 0.0, 0.0, 0.0]), 1e-3, 12),
 }
 
@@ -103,9 +93,9 @@ def test_lean_path_follows_the_unstable_branch_like_the_general_path(monkeypatch
     """``follow_stable=False``: the straight column is followed past its buckling (unstable), by the
     lean path as by the general one, bit for bit."""
     vm = resolve_model("paper-c-s")
-    lean = _sequence(vm, COMPRESSION, _max_deflection(), 20, follow_stable=False)
+    lean = _sequence(vm, COMPRESSION, max_deflection(), 20, follow_stable=False)
     _general(monkeypatch)
-    general = _sequence(vm, COMPRESSION, _max_deflection(), 20, follow_stable=False)
+    general = _sequence(vm, COMPRESSION, max_deflection(), 20, follow_stable=False)
     for a, b in zip(lean, general):
         _assert_same(a, b)
     assert not lean[-1].stable  # past buckling on the straight branch
@@ -167,7 +157,7 @@ def _escape_results(monkeypatch, handoff: bool):
         return out
 
     monkeypatch.setattr(EquilibriumSolver, "_relaxed_local", spy)
-    out = _sequence(resolve_model("paper-c-s"), COMPRESSION, _max_deflection(), 30)
+    out = _sequence(resolve_model("paper-c-s"), COMPRESSION, max_deflection(), 30)
     monkeypatch.undo()
     return out, spent
 
@@ -222,7 +212,7 @@ def test_lean_path_fallback_runs_under_one_blas_thread(two_blas_threads, monkeyp
         return inner(x, hessian)
 
     steps = 30
-    top = _max_deflection()
+    top = max_deflection()
     prev = s.solve(top / steps * COMPRESSION)
     monkeypatch.setattr(s.kin, "evaluate", evaluate)
     escaped = False

@@ -10,6 +10,7 @@ import pytest
 
 import vjm_pin.kinematics.chain as kmod
 from tests.blas_pools import blas_threads
+from tests.columns import COMPRESSION, max_deflection
 from vjm_pin.analysis.curve import trace_curve
 from vjm_pin.exceptions import InputError
 from vjm_pin.kinematics.chain import FLUSH_BELOW, flush_tiny
@@ -18,16 +19,6 @@ from vjm_pin.model.paper_models import PAPER_BEAM, paper_model_urdf
 from vjm_pin.model.registry import resolve_model
 from vjm_pin.solver import EquilibriumSolver, loaded_stiffness
 from vjm_pin.solver import threads as tmod
-
-COMPRESSION = np.array([-1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
-
-
-def _max_deflection():
-    """6 × the column's axial shortening at its Euler load (well past buckling), m."""
-    a = PAPER_BEAM["a"] * PAPER_BEAM["b"]
-    i_weak = PAPER_BEAM["b"] * PAPER_BEAM["a"] ** 3 / 12.0
-    p_euler = np.pi**2 * PAPER_BEAM["E"] * i_weak / 3.0**2
-    return 6.0 * p_euler * 3.0 / (PAPER_BEAM["E"] * a)
 
 
 def _tiny(x):
@@ -46,7 +37,7 @@ def test_flush_tiny_zeroes_only_tiny_entries():
 @pytest.mark.parametrize("k", [1, 2])
 def test_curve_with_and_without_flush_agree(k, monkeypatch):
     vm = resolve_model("paper-c-s") if k == 1 else load_vjm(paper_model_urdf("c", "s", beam=PAPER_BEAM, subdivide=k))
-    md = _max_deflection()
+    md = max_deflection()
     monkeypatch.setattr(kmod, "_flush_enabled", False)
     raw = trace_curve(vm, COMPRESSION, md, steps=30)
     monkeypatch.setattr(kmod, "_flush_enabled", True)
@@ -104,7 +95,7 @@ def test_one_blas_thread_inside_solve_and_restored_after(two_blas_threads):
 def test_one_blas_thread_inside_trace_curve(two_blas_threads):
     vm = resolve_model("paper-c-s")
     seen = []
-    trace_curve(vm, COMPRESSION, _max_deflection(), steps=4, progress=lambda i, n: seen.append(blas_threads()))
+    trace_curve(vm, COMPRESSION, max_deflection(), steps=4, progress=lambda i, n: seen.append(blas_threads()))
     assert len(seen) == 5 and all(n == 1 for counts in seen for n in counts)
     assert all(n == 2 for n in blas_threads())
 
@@ -113,7 +104,7 @@ def test_blas_policy_switch_off_leaves_pools_alone(two_blas_threads, monkeypatch
     monkeypatch.setattr(tmod, "_enabled", False)
     vm = resolve_model("paper-c-s")
     seen = []
-    trace_curve(vm, COMPRESSION, _max_deflection(), steps=2, progress=lambda i, n: seen.append(blas_threads()))
+    trace_curve(vm, COMPRESSION, max_deflection(), steps=2, progress=lambda i, n: seen.append(blas_threads()))
     assert seen and all(n == 2 for counts in seen for n in counts)
 
 
@@ -230,7 +221,7 @@ def test_benchmark_issue14_section_runs_and_release_solver_agrees():
     sys.modules["vjm_benchmark_i14"] = bench
     spec.loader.exec_module(bench)
     vm = resolve_model("paper-c-s")
-    n = bench.bench_newton_vs_floor("C", vm, COMPRESSION, _max_deflection(), 4, 1, 2)
+    n = bench.bench_newton_vs_floor("C", vm, COMPRESSION, max_deflection(), 4, 1, 2)
     assert n["force_agreement"] <= 1e-12
     # the same iterations as released when the safeguarded line search halves as it did then (the
     # quadratic backtrack, equilibrium._backtrack, may take other steps through the buckling crossing)
@@ -239,7 +230,7 @@ def test_benchmark_issue14_section_runs_and_release_solver_agrees():
     monkey = equilibrium._safeguard_shortcuts
     equilibrium._safeguard_shortcuts = False
     try:
-        h = bench.bench_newton_vs_floor("C", vm, COMPRESSION, _max_deflection(), 4, 1, 2)
+        h = bench.bench_newton_vs_floor("C", vm, COMPRESSION, max_deflection(), 4, 1, 2)
     finally:
         equilibrium._safeguard_shortcuts = monkey
     assert h["force_agreement"] <= 1e-12 and h["iterations"]["release"] == h["iterations"]["now"] == h["iterations"]["numpy"]

@@ -46,6 +46,7 @@ class HeldEigen:
 
     def __init__(self, lay, jz, cb, vtol):
         self._lay, self._jz, self._cb, self._vtol = lay, jz, cb, vtol
+        self._loop_args = (lay.starts, lay.dpos, lay.kp, lay.kd, jz, cb)  # (the compiled loops' leading arguments)
         self.n = int(jz.shape[1])
         self.m = int(cb.shape[0])
         self.order = lay.order
@@ -97,12 +98,7 @@ class HeldEigen:
         not definite, not settled in ``max_steps`` or not certified."""
         lay = self._lay
         st, lam, y = _loops()[0](
-            lay.starts,
-            lay.dpos,
-            lay.kp,
-            lay.kd,
-            self._jz,
-            self._cb,
+            *self._loop_args,
             np.ascontiguousarray(wrench, float),
             lay.kscale,
             max_steps,
@@ -131,14 +127,8 @@ class HeldEigen:
         where ``A − ΔF·B`` becomes singular from above (``1/ν_max``, the quotient's minimum);
         ``certified`` (with ``cert > 0``): a Sturm count finds ``Zᵀ sym(A − (1 − cert)·t·B) Z``
         positive definite, so that root lies in ``[(1 − cert)·t, t]``."""
-        lay = self._lay
         st, t, yy, certified = _loops()[1](
-            lay.starts,
-            lay.dpos,
-            lay.kp,
-            lay.kd,
-            self._jz,
-            self._cb,
+            *self._loop_args,
             np.ascontiguousarray(w0, float),
             np.ascontiguousarray(w1, float),
             np.ascontiguousarray(y, float),
