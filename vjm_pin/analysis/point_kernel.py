@@ -48,7 +48,7 @@ import sys
 import numpy as np
 
 from vjm_pin.kinematics.chain import FLUSH_BELOW
-from vjm_pin.solver.chain_kernel import _rate_lin, _rate_terms, _twists
+from vjm_pin.solver.chain_kernel import _rate_lin, _rate_terms, _twist_rate_row, _twists
 from vjm_pin.solver.kernel import _back_substitute
 from vjm_pin.solver.lapack import lapack as _lapack
 from vjm_pin.solver.stability import SCIPY_LAPACK_MAX_N
@@ -692,12 +692,7 @@ def _point_loops(jfree, hz, kz, task, dt, mask, wrench, nt, use_rate, fast_rank,
                 p0 += xd[j] * li[j, 0]
                 p1 += xd[j] * li[j, 1]
                 p2 += xd[j] * li[j, 2]
-        dom[i, 0] = o1 * om[i, 2] - o2 * om[i, 1]
-        dom[i, 1] = o2 * om[i, 0] - o0 * om[i, 2]
-        dom[i, 2] = o0 * om[i, 1] - o1 * om[i, 0]
-        dli[i, 0] = o1 * li[i, 2] - o2 * li[i, 1] + om[i, 1] * p2 - om[i, 2] * p1
-        dli[i, 1] = o2 * li[i, 0] - o0 * li[i, 2] + om[i, 2] * p0 - om[i, 0] * p2
-        dli[i, 2] = o0 * li[i, 1] - o1 * li[i, 0] + om[i, 0] * p1 - om[i, 1] * p0
+        _twist_rate_row(i, o0, o1, o2, p0, p1, p2, li, om, dli, dom)
     # per column: a = v×f + ω×m, da = δv×f + v×δf + δω×m + ω×δm, b = v×f, db = δv×f + v×δf
     aa, da, bb, db = _rate_terms(li, om, dli, dom, wrench, fd, task)
     quad = 0.0

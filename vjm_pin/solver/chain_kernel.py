@@ -538,6 +538,18 @@ def _twists(jz):
     return li, om
 
 
+def _twist_rate_row(i, o0, o1, o2, p0, p1, p2, li, om, dli, dom):
+    """Row ``i`` of the twists' rates along a motion: ``δω_i = o × ω_i`` and
+    ``δv_i = o × v_i + ω_i × p`` (``o``: the summed angular rates of the joints before ``i``,
+    ``p``: the summed linear rates of those after it), written into ``dom`` and ``dli``."""
+    dom[i, 0] = o1 * om[i, 2] - o2 * om[i, 1]
+    dom[i, 1] = o2 * om[i, 0] - o0 * om[i, 2]
+    dom[i, 2] = o0 * om[i, 1] - o1 * om[i, 0]
+    dli[i, 0] = o1 * li[i, 2] - o2 * li[i, 1] + om[i, 1] * p2 - om[i, 2] * p1
+    dli[i, 1] = o2 * li[i, 0] - o0 * li[i, 2] + om[i, 2] * p0 - om[i, 0] * p2
+    dli[i, 2] = o0 * li[i, 1] - o1 * li[i, 0] + om[i, 0] * p1 - om[i, 1] * p0
+
+
 def _rate_terms(li, om, dli, dom, wrench, fd, task):
     """Per column of ``dμ/ds`` (:meth:`~vjm_pin.analysis.point_kernel.PointKernel.margin_rate`;
     also :func:`~vjm_pin.analysis.point_kernel._point_loops`), with the wrench ``F = (f, m)`` and
@@ -775,12 +787,7 @@ def _point_chain(J6, cols, order, task, dt, prow, starts, dpos, kd, kp, kscale, 
     p0, p1, p2 = 0.0, 0.0, 0.0
     for i in range(n - 1, -1, -1):
         o0, o1, o2 = pre[i, 0], pre[i, 1], pre[i, 2]
-        dom[i, 0] = o1 * om[i, 2] - o2 * om[i, 1]
-        dom[i, 1] = o2 * om[i, 0] - o0 * om[i, 2]
-        dom[i, 2] = o0 * om[i, 1] - o1 * om[i, 0]
-        dli[i, 0] = o1 * li[i, 2] - o2 * li[i, 1] + om[i, 1] * p2 - om[i, 2] * p1
-        dli[i, 1] = o2 * li[i, 0] - o0 * li[i, 2] + om[i, 2] * p0 - om[i, 0] * p2
-        dli[i, 2] = o0 * li[i, 1] - o1 * li[i, 0] + om[i, 0] * p1 - om[i, 1] * p0
+        _twist_rate_row(i, o0, o1, o2, p0, p1, p2, li, om, dli, dom)
         p0 += xc[i] * li[i, 0]
         p1 += xc[i] * li[i, 1]
         p2 += xc[i] * li[i, 2]
@@ -809,9 +816,10 @@ def _point_chain(J6, cols, order, task, dt, prow, starts, dpos, kd, kp, kscale, 
 # =========================================================================== loading, layout
 _COMPILED: list = []  # [(iterate, point)] once loaded, [None] when numba is unavailable
 _HELPERS = ("_w_gens", "_bordered", "_factor", "_shifted", "_raw_solve", "_kkt_solve", "_count", "_project",
-            "_rayleigh", "_inverse", "_split", "_smallest", "_gather", "_twists", "_rate_terms", "_rate_lin")
+            "_rayleigh", "_inverse", "_split", "_smallest", "_gather", "_twists", "_twist_rate_row", "_rate_terms",
+            "_rate_lin")
 #: The ones :func:`vjm_pin.analysis.point_kernel._point_loops` calls too.
-RATE_HELPERS = ("_back_substitute", "_twists", "_rate_terms", "_rate_lin")
+RATE_HELPERS = ("_back_substitute", "_twists", "_twist_rate_row", "_rate_terms", "_rate_lin")
 #: The dense kernel's helpers (vjm_pin.solver.kernel) this kernel calls, compiled there once (the block
 #: elimination loops are chain_algebra's, compiled by its ``_kernels``). numba's on-disk cache is
 #: invalidated by changes to this file only: after editing those, clear ``__pycache__``.
