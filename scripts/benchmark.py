@@ -1241,12 +1241,16 @@ def bench_import_wall(repeats: int = 5) -> dict:
     interpreter) against ``python -c "import pinocchio"``, now and as released (the package of
     :data:`RELEASE_COMMIT` first on ``PYTHONPATH``), interleaved subprocesses, min of
     ``repeats``. Byte-code caching is allowed (in a temporary ``PYTHONPYCACHEPREFIX``, warmed
-    once) even when the environment disables it, as for an installed package."""
+    once) even when the environment disables it, as for an installed package. ``VJM_PIN_JIT`` is
+    removed from the subprocesses' environment (the default kernel choice, as a user runs it)."""
     import subprocess
     import tempfile
 
     env = dict(os.environ)
     env.pop("PYTHONDONTWRITEBYTECODE", None)
+    # a one-shot command as users run it: the kernel choice by default (``auto``), not this run's
+    # ``VJM_PIN_JIT`` (``=1`` would import numba and load every compiled kernel: ~1 s)
+    env.pop("VJM_PIN_JIT", None)
     env["PYTHONPYCACHEPREFIX"] = tempfile.mkdtemp(prefix="vjm_bench_pyc_")
     analyze = "import sys; from vjm_pin.cli import main; sys.exit(main(['analyze', 'ur5', '--wrench', '0', '0', '-100']))"
     cmds = {
