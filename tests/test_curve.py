@@ -415,3 +415,62 @@ def test_second_order_predictor_keeps_the_curve_with_fewer_newton_iterations(
         i = first.critical[0].index
         its = [sum(p.equilibrium.iterations for p in c.points[i + 1:]) for c in (first, second)]
         assert its[1] < its[0], its
+
+
+def test_event_shortcut_gives_the_cubic_models_answer(monkeypatch):
+    """``_Tracer.first_event`` answers "no event" without the cubic's extremum where the chord bound
+    proves it (two ends of one sign, not the shape of an imperfect bifurcation); over random ends the
+    answer is always the one of the cubic Hermite model itself (``_hermite_extremum``): a crossing, a
+    near extremum (sampled: ``reach``), an imperfect bifurcation, or nothing."""
+    from vjm_pin.analysis import curve as curve_mod
+    from vjm_pin.solver.equilibrium import EquilibriumSolver
+
+    vm = resolve_model("paper-c-s")
+    d = np.array([-1.0, 0, 0, 0, 0, 0])
+    tr = curve_mod._Tracer(vm, d, 0.004, EquilibriumSolver(vm), 1e-4)
+    tr.seg_margin = 1.0
+    reached = []
+    monkeypatch.setattr(tr, "reach", lambda p, s: reached.append(s))  # (returns None: the search stops)
+    calls = {"n": 0}
+    herm = curve_mod._hermite_extremum
+
+    def counted(*args, **kwargs):
+        calls["n"] += 1
+        return herm(*args, **kwargs)
+
+    monkeypatch.setattr(curve_mod, "_hermite_extremum", counted)
+    rng = np.random.default_rng(11)
+    h = 1e-4
+    seen = {"cross": 0, "near": 0, "max": 0, "none": 0}
+    trials = 3000
+    for _ in range(trials):
+        sign = -1.0 if rng.random() < 0.85 else 1.0
+        f0 = sign * 10.0 ** rng.uniform(-4, 0)
+        f1 = sign * 10.0 ** rng.uniform(-4, 0) if rng.random() < 0.95 else -f0
+        g0, g1 = (rng.standard_normal(2) * 10.0 ** rng.uniform(-3, 1, 2)) / h
+        p = curve_mod._BP(0.0, None, 0.0, 1.0, None, f0, -1.0)
+        q = curve_mod._BP(h, None, 0.0, 1.0, None, f1, -1.0)
+        p.dmu, q.dmu = float(g0), float(g1)
+        reached.clear()
+        got = tr.first_event(p, q)
+        # the cubic model's own answer
+        if f0 < 0 <= f1:
+            want = "cross"
+        elif not ((f0 < 0 and f1 < 0) or (f0 >= 0 and f1 >= 0)):
+            want = "none"
+        else:
+            both_neg = f0 < 0
+            ext = herm(0.0, f0, g0, h, f1, g1, maximum=both_neg)
+            want = "none"
+            if ext is not None:
+                _, v, dev = ext
+                tiny = 1e-12 * max(abs(f0), abs(f1), tr.thr)
+                if (v >= -0.5 * dev - tiny) if both_neg else (v <= 0.5 * dev + tiny):
+                    want = "near"
+                elif both_neg and g0 > 0 >= g1 and -v <= 1.5 * IMPERFECT_RATIO * tr.seg_margin:
+                    want = "max"
+        got_kind = "near" if reached else ("none" if got is None else got[0])
+        assert got_kind == want, (f0, g0, f1, g1, got, want)
+        seen[want] += 1
+    assert min(seen.values()) > 0, seen  # every answer occurs
+    assert calls["n"] < trials - seen["cross"] - 100  # the shortcut answered a good share of them

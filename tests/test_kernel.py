@@ -325,9 +325,10 @@ def test_lean_verdict_certificate_agrees_with_the_eigenvalues(compiled):
 
 @pytest.mark.parametrize("case", ["model-c", "ur5-link-springs", "prismatic-6row"])
 def test_compiled_restoration_matches_the_numpy_one(case, compiled, monkeypatch):
-    """``_restore`` with the compiled step (``kernel._restore_step``) against its numpy loop from
-    configurations pushed off an equilibrium (the escape's starts) and from a far, damped start: the
-    same steps to rounding, the same number of them and the same verdict."""
+    """``_restore`` with the compiled step (``kernel._restore_step``, in the whole compiled restoration
+    ``kernel._restore_into`` with the compiled kinematics) against its numpy loop from configurations
+    pushed off an equilibrium (the escape's starts) and from a far, damped start: the same steps to
+    rounding, the same number of kinematics evaluations and the same verdict."""
     vm = CASES[case]()
     s = eqmod.EquilibriumSolver(vm)
     d = np.zeros(6)
@@ -350,6 +351,15 @@ def test_compiled_restoration_matches_the_numpy_one(case, compiled, monkeypatch)
                 return inner(x, hessian)
 
             monkeypatch.setattr(s.kin, "evaluate", evaluate)
+            loop = kernel.restore_looped()
+            if loop is not None:  # the compiled restoration: its count of evaluations
+
+                def counted(*a, loop=loop, steps=steps):
+                    status, evals = loop(*a)
+                    steps.extend([1] * evals)
+                    return status, evals
+
+                monkeypatch.setattr(kernel, "_restore_looped", counted)
             s.kin._last = None
             x, _st, ok = s._restore(x0.copy(), None, p_t, r_t)
             monkeypatch.undo()

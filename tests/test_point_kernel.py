@@ -267,3 +267,162 @@ def test_top_eigenpair_matches_lapack(compiled_):
         assert abs(lam - ev[-1]) <= 1e-14 * scale * max(1, a.shape[0] / 4), (a.shape, lam, ev[-1])
         assert abs(np.linalg.norm(v) - 1.0) <= 1e-13
         assert np.linalg.norm(a @ v - lam * v) <= 1e-13 * scale * a.shape[0], a.shape
+
+
+# --------------------------------------------------------------------------- the corrector's own QR
+def _corrector_points(name, direction, max_deflection, steps, monkeypatch):
+    """The compiled tracer's converged corrector answers of a short curve (each with the prediction it
+    started from and the continuity limit), the tracer and the curve."""
+    monkeypatch.setenv("VJM_PIN_JIT", "1")
+    from vjm_pin.solver.equilibrium import EquilibriumSolver as Solver
+
+    raws = []
+    original = Solver._corrector
+
+    def corrector(self, ctx, p_t, r_t, x, flushed=False):
+        raw = original(self, ctx, p_t, r_t, x, flushed)
+        if raw is not None:
+            raws.append((raw, np.array(x, float)))
+        return raw
+
+    monkeypatch.setattr(Solver, "_corrector", corrector)
+    vm = resolve_model(name)
+    solver = EquilibriumSolver(vm)
+    c = trace_curve(vm, direction, max_deflection, steps=steps, solver=solver)
+    monkeypatch.setattr(Solver, "_corrector", original)
+    tr = curve_mod._Tracer(vm, _direction(vm, direction), max_deflection, solver, 1e-4)
+    tr._reuse_setup()
+    return vm, tr, raws, c
+
+
+#: The serial models whose curves take the fused corrector (a null space: m < n; a 6-D robot with n = m
+#: has none): buckling, the imperfect column, the knee of Model C Z.
+REUSE_CASES = [("paper-c-s", [-1.0, 0.0, 0.0], 0.004, 8), ("paper-b-z", [-1.0, 0.0, 0.0], 0.1, 4),
+               ("paper-c-z", [-1.0, 0.0, 0.0], 0.012, 6)]
+
+
+@pytest.mark.parametrize("name,direction,max_deflection,steps", REUSE_CASES, ids=[c[0] for c in REUSE_CASES])
+def test_point_on_the_correctors_qr_matches_the_recomputing_kernels(name, direction, max_deflection, steps,
+                                                                     monkeypatch):
+    """The fused step's point on the converged Newton iteration's own Householder reflectors
+    (``_reuse_point_loops``) against the compiled kernel that factors ``J`` again (``_point_loops``: the
+    tangent bit for bit, μ and dμ/ds to rounding) and the numpy kernel on the equilibrium's Blocks; the
+    force ``dᵀF``, the tangent's layout, and the status of a strayed corrector and of a declined rank test."""
+    if not pk.compiled():
+        pytest.skip("numba is not importable here")
+    vm, tr, raws, _ = _corrector_points(name, direction, max_deflection, steps, monkeypatch)
+    assert tr._reuse and len(raws) >= steps
+    fn, ci, cfl, kz, mask = tr._rargs
+    kern, nq = tr.kernel, vm.model.nq
+    checked = 0
+    for raw, x_pred in raws:
+        x, kf, j6 = raw[0], raw[4], raw[3].jacobian
+        assert kf[1].shape == (kern.m + 1, kern.n)  # the compiled corrector's reflectors
+        out = np.full(nq + 6, np.nan)
+        st, k, mu, rate, force = fn(x, x_pred, np.inf, j6, kf[1], kf[6], kf[7], ci, cfl, kz, mask, out)
+        assert force == pytest.approx(float(tr.d @ kf[7]), rel=1e-15, abs=1e-300)
+        jfree = np.ascontiguousarray(j6.take(tr.free, axis=1))
+        want = pk.compiled()(jfree, kf[6], kz, kern.task, kern.dt, mask, kf[7], kern.nt, True, pk.FAST_RANK,
+                             curve_mod.SINGULAR_RCOND)
+        assert st == want[0]
+        b = blocks_at(vm, x, kf[7], tr.kin)
+        ref = kern.point(b, mask, kf[7], None)  # numpy, on the Blocks
+        if st:
+            continue
+        checked += 1
+        lay_x, lay_w = np.zeros(nq), np.zeros(6)
+        lay_x[tr.free], lay_w[tr.task] = want[2], want[3]
+        assert k == want[1] and out[:nq].tobytes() == lay_x.tobytes() and out[nq:].tobytes() == lay_w.tobytes()
+        scale = max(_scale(vm, tr.d, b), abs(mu))
+        assert abs(mu - want[4]) <= 1e-12 * scale
+        assert rate == pytest.approx(want[5], rel=1e-9, abs=1e-12 * scale)
+        assert ref is not None
+        assert k == pytest.approx(ref[0], rel=1e-9)
+        assert abs(mu - ref[3]) <= 1e-10 * scale
+        assert rate == pytest.approx(ref[4], rel=1e-6, abs=1e-12 * scale)
+        # a corrector that strayed: nothing else done (out untouched)
+        out2 = np.full(nq + 6, np.nan)
+        corr = float(np.abs((x - x_pred)[tr.free] / tr.var_scale).max())
+        if corr > 0:
+            assert fn(x, x_pred, corr * (1 - 1e-12), j6, kf[1], kf[6], kf[7], ci, cfl, kz, mask, out2)[0] == -1
+            assert np.isnan(out2).all()
+        # a rank test that cannot pass: declined
+        cfl2 = cfl.copy()
+        cfl2[0] = 2.0  # σ_min > 2 σ_max never holds
+        assert fn(x, x_pred, np.inf, j6, kf[1], kf[6], kf[7], ci, cfl2, kz, mask, out2)[0] == 1
+    assert checked >= len(raws) - 2
+
+
+def test_rate_on_the_correctors_qr_matches_central_differences(monkeypatch):
+    """dμ/ds of ``_reuse_point_loops`` against central differences of the generic μ along its own
+    tangent (the kinematics re-evaluated at both ends; Richardson over a range of steps)."""
+    if not pk.compiled():
+        pytest.skip("numba is not importable here")
+    # before buckling (μ strongly curved) and past it (the bent branch: a small rate)
+    vm, tr, raws, _ = _corrector_points("paper-c-s", [-1.0, 0.0, 0.0], 6e-4, 6, monkeypatch)
+    fn, ci, cfl, kz, mask = tr._rargs
+    nq = vm.model.nq
+    rates = []
+    for raw, x_pred in raws:
+        x, kf, j6 = raw[0], raw[4], raw[3].jacobian
+        out = np.empty(nq + 6)
+        st, _, _, rate, _ = fn(x, x_pred, np.inf, j6, kf[1], kf[6], kf[7], ci, cfl, kz, mask, out)
+        if st:
+            continue
+        x_dot, w_dot = out[:nq], out[nq:]
+        sc = np.abs(x_dot[tr.free] / tr.var_scale).max()
+
+        def mu_at(h, x=x, kf=kf, x_dot=x_dot, w_dot=w_dot):
+            return _generic_mu(vm, tr.d, blocks_at(vm, x + h * x_dot, kf[7] + h * w_dot, tr.kin))
+
+        best = np.inf
+        for step in (1e-4, 1e-5, 1e-6, 1e-7, 1e-8):
+            h = step / sc
+            d1 = (mu_at(h) - mu_at(-h)) / (2 * h)
+            d2 = (mu_at(h / 2) - mu_at(-h / 2)) / h
+            best = min(best, abs(d1 - rate), abs((4 * d2 - d1) / 3 - rate))
+        rates.append((rate, best))
+    # relative to the rate, and to the largest rate for the small ones (past buckling dμ/ds is ~1e-4 of
+    # its size before it; the differences' rounding is the same in absolute terms)
+    big = max(abs(r) for r, _ in rates)
+    for rate, best in rates:
+        assert best <= 2e-5 * abs(rate) + 2e-9 * big, (rate, best)
+    assert len(rates) >= 4 and min(abs(r) for r, _ in rates) < 1e-3 * big  # both kinds checked
+
+
+@pytest.mark.parametrize("name,direction,md,steps", [("paper-c-s", [-1, 0, 0], 0.004, 40),
+                                                     ("paper-b-z", [-1, 0, 0], 0.1, 20)], ids=["c-s", "b-z"])
+def test_curve_on_the_correctors_qr_is_the_recomputing_curve(name, direction, md, steps, monkeypatch):
+    """Whole compiled curves with the fused step's point on the corrector's QR and with it factored
+    again (private switch ``curve._reuse_qr``): the same points and critical points to rounding, and the
+    reusing kernel is the one that ran."""
+    if not pk.compiled():
+        pytest.skip("numba is not importable here")
+    monkeypatch.setenv("VJM_PIN_JIT", "1")
+    vm = resolve_model(name)
+    calls = {"n": 0}
+    original = pk.reuse()
+
+    def counted(*args):
+        calls["n"] += 1
+        return original(*args)
+
+    monkeypatch.setattr(pk, "_reuse", counted)
+    on = trace_curve(vm, direction, md, steps=steps, solver=EquilibriumSolver(vm))
+    assert calls["n"] >= steps
+    monkeypatch.setattr(curve_mod, "_reuse_qr", False)
+    calls["n"] = 0
+    off = trace_curve(vm, direction, md, steps=steps, solver=EquilibriumSolver(vm))
+    assert calls["n"] == 0
+    assert len(on.points) == len(off.points)
+    scale = np.abs(off.forces).max()
+    assert np.abs(on.forces - off.forces).max() <= 1e-10 * scale
+    for p, q in zip(on.points, off.points):
+        assert (p.stable, p.stable_end_held) == (q.stable, q.stable_end_held)
+        assert p.stiffness == pytest.approx(q.stiffness, rel=1e-9)
+        assert p.force_control_margin == pytest.approx(q.force_control_margin, rel=1e-8, abs=1e-10 * scale)
+    assert [c.kind for c in on.critical] == [c.kind for c in off.critical]
+    for a, c in zip(on.critical, off.critical):
+        # an imperfect point (b-z) sits at a flat maximum of μ: it moves with the rounding of μ
+        assert a.force == pytest.approx(c.force, rel=1e-9 if c.kind != "imperfect" else 1e-6)
+        assert a.index == c.index

@@ -148,6 +148,9 @@ _second_order = False
 #: ``EquilibriumSolver._solve_local`` then :meth:`_Tracer.point`; True: the fused warm corrector of
 #: :meth:`_Tracer._fused_step`, the same numbers; for the tests and the benchmark).
 _fused_corrector = True
+#: Private switch (False: the fused step's compiled point kernel factors ``J`` again instead of reusing
+#: the converged Newton iteration's QR; the same numbers to rounding; for the tests and the benchmark).
+_reuse_qr = True
 #: The second-order predictor term of a sub-step ``ds`` uses the tangent of the point continued
 #: from when that point lies at least this × ``|ds|`` behind (a shorter difference quotient of
 #: the tangent is dominated by rounding).
@@ -433,8 +436,10 @@ class _LateBP(_BP):
     __slots__ = ("_lv", "_stab")
 
     def __init__(self, s, eq, force, k, mu, stab):
+        # (the slots of _BP.__init__ set here: λ = None, computed when first read)
         self._stab, self._lv = stab, None
-        super().__init__(s, eq, force, k, None, mu, None)
+        self.s, self.eq, self.force, self.k, self.st = float(s), eq, float(force), k, None
+        self.mu, self.dmu, self.tan, self.hist = mu, None, False, None
 
     def _get_lam(self) -> float:
         v = self._lv
@@ -540,7 +545,11 @@ class _Tracer:
         self._corr = self.cont._corrector_context() if _fast_points and _fused_corrector else None
         self._jit = _jit_mode() if self._corr is not None else None
         self._pargs = None  # the compiled point kernel's constant arguments (_fused_step)
-        self._rt = None  # (rotation part of the last target, its target rotation) (_fused_step)
+        self._reuse = None  # the fused step's point on the corrector's QR (_reuse_setup; None: not decided yet)
+        self._rargs = self._hh_shape = None  # its constant arguments, the reflectors' shape (_reuse_setup)
+        self._rt = None  # (rotation part of the last target or None for a translation, its target rotation) (_fused_step)
+        self._d_lin, self._d_rot = d[:3].copy(), d[3:].copy()  # (s·d[:3] is (s·d)[:3], element by element)
+        self._d_translation = not self._d_rot.any()
         self._dense_point = False  # the compiled dense point kernel applies (PointKernel.point's dispatch)
         self._fz = None  # the fused step's compiled helpers once the compiled point kernel is used (_point_fn)
         self._nq = vm.model.nq
@@ -683,13 +692,14 @@ class _Tracer:
         else:
             x_pred, w_pred = a.eq.x.copy(), a.eq.wrench.copy()
             move = 0.0
-        target = s * self.d
         if t is not None and self._corr is not None:
-            got = self._fused_step(a, s, target, x_pred, move, t)
+            got = self._fused_step(a, s, x_pred, move, t)
             if got is not _GENERAL:
                 return got
             eq = None  # the local iteration gave way: as _solve_local returning None
+            target = s * self.d
         else:
+            target = s * self.d
             eq = self.cont._solve_local(target, x_pred)
         if eq is None:
             if abs(ds) > 1e-4 * self.range and len(self.vm.task) < len(self.free):
@@ -730,7 +740,7 @@ class _Tracer:
             self._fz = _pk.fused()
         return fn
 
-    def _fused_step(self, a: _BP, s: float, target, x_pred, move: float, t):
+    def _fused_step(self, a: _BP, s: float, x_pred, move: float, t):
         """:meth:`step`'s corrector and point in one lean pass (the common step of a curve): the
         solver's fused local iteration from the prediction (``EquilibriumSolver._corrector``, the
         iterations of ``_solve_local``), the continuity check, then the point kernel on the
@@ -739,17 +749,22 @@ class _Tracer:
         :data:`_GENERAL` when the local iteration gave way (the caller goes on as after
         ``_solve_local`` returned None). Every number is that of the general path; a point the
         compiled point kernel declines goes through :meth:`point` (its generic path). With the
-        compiled kernels the continuity check, the point kernel and the tangent's layout are one
-        call (:func:`~vjm_pin.analysis.point_kernel._fused_point_loops`). Where the compiled corrector
+        compiled kernels the continuity check, the point kernel, the force ``dᵀF`` and the tangent's
+        layout are one call on the corrector's own QR of ``J``
+        (:func:`~vjm_pin.analysis.point_kernel._reuse_point_loops`; where the corrector's kernel hands out
+        an explicit ``Q`` instead, :func:`~vjm_pin.analysis.point_kernel._fused_point_loops` factors ``J``
+        again: the same numbers to rounding). Where the compiled corrector
         certified "stable" without the eigenvalues of eq. (23) the point is a :class:`_LateBP`: ``λ``
         computed when first read (the tracer's verdicts ask the certificate first)."""
         solver = self.cont
         rt = self._rt
-        if rt is not None and rt[0] == target[3:].tobytes():  # displace(p0, r0, target), its rotation kept
-            p_t, r_t = solver.p0 + target[:3], rt[1]
+        if rt is not None and (rt[0] is None or rt[0] == (s * self._d_rot).tobytes()):
+            # displace(p0, r0, s·d) with its rotation kept (fixed when d is a translation): the same numbers
+            p_t, r_t = solver.p0 + s * self._d_lin, rt[1]
         else:
+            target = s * self.d
             p_t, r_t = _displace(solver.p0, solver.r0, target)
-            self._rt = (target[3:].tobytes(), r_t)
+            self._rt = (None if self._d_translation else target[3:].tobytes(), r_t)
         raw = solver._corrector(self._corr, p_t, r_t, x_pred, flushed=True)  # (step flushed x_pred)
         if raw is None:
             return _GENERAL
@@ -766,20 +781,34 @@ class _Tracer:
             p = self.point(eq, s)
             p.hist = (a.s, t[0], t[1])
             return p
-        pa = self._pargs
-        if pa is None:
-            pk = self.kernel
-            mask = self.mask if self.mask is not None else pk._nomask
-            pa = self._pargs = (pk.kz, pk.task, pk.dt, mask, pk.nt, self.mask is not None, FAST_RANK, SINGULAR_RCOND,
-                                np.zeros(6))
-        x_dot = np.empty(self._nq)
-        w_dot = np.empty(6)
-        try:
-            st, k, mu, rate = fz[1](raw[0], x_pred, CORRECTOR_RATIO * move + 1e-9, self.free, self.var_scale,
-                                    raw[3].jacobian, kf[6], pa[0], pa[1], pa[2], pa[3], kf[7] if pa[5] else pa[8],
-                                    pa[4], pa[5], pa[6], pa[7], x_dot, w_dot)
-        except np.linalg.LinAlgError:  # an exactly singular matrix (numba's np.linalg raises): after the check
-            st = 1
+        if self._reuse is None:
+            self._reuse_setup()
+        if self._reuse and kf[1].shape == self._hh_shape:  # the point on the corrector's own QR
+            pa = self._rargs
+            out = np.empty(self._nq + 6)
+            try:
+                st, k, mu, rate, force = pa[0](raw[0], x_pred, CORRECTOR_RATIO * move + 1e-9, raw[3].jacobian, kf[1],
+                                               kf[6], kf[7], pa[1], pa[2], pa[3], pa[4], out)
+            except np.linalg.LinAlgError:  # an exactly singular matrix (numba's np.linalg raises): after the check
+                st = 1
+            tan = (out[:self._nq], out[self._nq:]) if not st else None
+        else:
+            pa = self._pargs
+            if pa is None:
+                pk = self.kernel
+                mask = self.mask if self.mask is not None else pk._nomask
+                pa = self._pargs = (pk.kz, pk.task, pk.dt, mask, pk.nt, self.mask is not None, FAST_RANK,
+                                    SINGULAR_RCOND, np.zeros(6))
+            x_dot = np.empty(self._nq)
+            w_dot = np.empty(6)
+            try:
+                st, k, mu, rate = fz[1](raw[0], x_pred, CORRECTOR_RATIO * move + 1e-9, self.free, self.var_scale,
+                                        raw[3].jacobian, kf[6], pa[0], pa[1], pa[2], pa[3], kf[7] if pa[5] else pa[8],
+                                        pa[4], pa[5], pa[6], pa[7], x_dot, w_dot)
+            except np.linalg.LinAlgError:  # an exactly singular matrix (numba's np.linalg raises): after the check
+                st = 1
+            tan = (x_dot, w_dot)
+            force = None
         if st < 0:  # the corrector strayed
             return None
         self._npts += 1
@@ -788,16 +817,34 @@ class _Tracer:
             p = self.point(eq, s)
         else:
             ev = raw[5]
+            if force is None:
+                force = self.d @ eq.wrench
             if ev is None:  # "stable" certified, the eigenvalues when first read (_LateBP)
-                p = _LateBP(s, eq, self.d @ eq.wrench, k, mu, raw[7])
+                p = _LateBP(s, eq, force, k, mu, raw[7])
             else:
                 lam = float(ev[-1]) if ev.size else -np.inf  # (ascending: _max_eig)
-                p = _BP(s, eq, self.d @ eq.wrench, k, None, mu, lam)
-            if pa[5] and _analytic_rate:
+                p = _BP(s, eq, force, k, None, mu, lam)
+            if self.mask is not None and _analytic_rate:
                 p.dmu = rate
-            p.tan = (x_dot, w_dot)
-        p.hist = (a.s, t[0], t[1])
+            p.tan = tan
+        if self.second_order:
+            p.hist = (a.s, t[0], t[1])
         return p
+
+    def _reuse_setup(self) -> None:
+        """Whether the fused step's point may run on the corrector's own factorisation
+        (:func:`~vjm_pin.analysis.point_kernel._reuse_point_loops`, where the corrector's kernel
+        hands out the Householder reflectors of ``Jᵀ``, ``(m + 1, n)``: the compiled one), and its
+        packed constants (``_rargs``)."""
+        pk = self.kernel
+        fn = _pk.reuse() if _reuse_qr else None
+        self._reuse = ok = fn is not None
+        self._hh_shape = (pk.m + 1, pk.n)
+        if ok:
+            rate = self.mask is not None
+            ci = np.concatenate([[pk.n, pk.nt, pk.m, int(rate)], self.free, pk.task]).astype(np.int64)
+            cfl = np.concatenate([[FAST_RANK, SINGULAR_RCOND], self.d, pk.dt, self.var_scale]).astype(float)
+            self._rargs = (fn, ci, cfl, pk.kz, self.mask if rate else pk._nomask)
 
     def reach(self, a: _BP, s: float) -> _BP | None:
         """``a``'s branch continued to ``s`` in adaptive sub-steps; None if it cannot be."""
@@ -890,21 +937,40 @@ class _Tracer:
         """The first candidate event on the continued branch over ``[p, q]``:
         ``("cross", lo, hi)`` (μ crosses zero from below in it), ``("max", lo, hi)`` (an
         interior maximum of μ < 0), or None."""
-        if p.mu < 0 <= q.mu:
+        f0, f1 = p.mu, q.mu
+        if f0 < 0 <= f1:
             return ("cross", p, q)
-        if depth >= DIP_DEPTH or q.s - p.s <= 4 * self.hmin:
+        h = q.s - p.s
+        if depth >= DIP_DEPTH or h <= 4 * self.hmin:
             return None
-        g0, g1 = self.dmu(p), self.dmu(q)
+        g0, g1 = p.dmu, q.dmu
+        if g0 is None:
+            g0 = self.dmu(p)
+        if g1 is None:
+            g1 = self.dmu(q)
         if not (math.isfinite(g0) and math.isfinite(g1)):
             return None
-        both_neg = p.mu < 0 and q.mu < 0
-        if not both_neg and not (p.mu >= 0 and q.mu >= 0):
+        both_neg = f0 < 0 and f1 < 0
+        if not both_neg and not (f0 >= 0 and f1 >= 0):
             return None  # μ falls through zero: stability regained (not an event)
-        ext = _hermite_extremum(p.s, p.mu, g0, q.s, q.mu, g1, maximum=both_neg)
+        # The cubic is the chord plus t(1−t)[(a₀−Δ)(1−t) − (a₁−Δ)t] (a = h·g, Δ = f₁ − f₀): at an
+        # interior extremum |value − chord| ≤ M/4, M = max|a − Δ|. So with two negative ends and no
+        # imperfect-bifurcation shape (g₀ > 0 ≥ g₁) it cannot come "near" zero when
+        # max(f₀, f₁) + M/2 < −2·tiny (M/8 and tiny to spare for the rounding of the extremum's value,
+        # ~1e-14·(|f| + M); the same for two non-negative ends): the answer of the extremum below (None)
+        # without computing it.
+        tiny = 1e-12 * max(abs(f0), abs(f1), self.thr)
+        dl = f1 - f0
+        bound = 0.5 * max(abs(h * g0 - dl), abs(h * g1 - dl))
+        if both_neg:
+            if max(f0, f1) + bound < -2.0 * tiny and not g0 > 0 >= g1:
+                return None
+        elif min(f0, f1) - bound > 2.0 * tiny:
+            return None
+        ext = _hermite_extremum(p.s, f0, g0, q.s, f1, g1, maximum=both_neg)
         if ext is None:
             return None
         t, v, dev = ext
-        tiny = 1e-12 * max(abs(p.mu), abs(q.mu), self.thr)
         near = v >= -0.5 * dev - tiny if both_neg else v <= 0.5 * dev + tiny
         if near:
             m = self.reach(p, p.s + t * (q.s - p.s))
@@ -1028,11 +1094,9 @@ class _Tracer:
             h = min(h, rem)
             s_try = s_end if rem - h <= 1e-14 * self.range else cur.s + h
             nxt = self.step(cur, s_try, True) if self.second_order else self.step(cur, s_try)
-            if (
-                nxt is not None
-                and s_try - cur.s > FINE_STEP * self.range
-                and (cur.mu < 0 <= nxt.mu or (cur.below(self.thr) and nxt.above(self.thr)))
-            ):
+            lost = None  # eq. (23) lost over the sub-step (cur.below and nxt.above), once asked
+            if (nxt is not None and s_try - cur.s > FINE_STEP * self.range
+                    and (cur.mu < 0 <= nxt.mu or (lost := cur.below(self.thr) and nxt.above(self.thr)))):
                 nxt = None  # a stability change is only accepted over a fine step (no jump across a knee)
             if nxt is None:
                 h *= 0.5
@@ -1048,7 +1112,9 @@ class _Tracer:
                 self.seg_margin = 0.0
                 h = max(self.eps(cur.s), h / 4)
                 continue
-            if nxt.above(self.thr) and cur.below(self.thr):
+            if lost is None:
+                lost = nxt.above(self.thr) and cur.below(self.thr)
+            if lost:
                 # eq. (23) lost without a new force-control event (μ ≥ 0 already): switch
                 u, _, _ = self.locate_lam(cur, nxt)
                 sw = self.switch(

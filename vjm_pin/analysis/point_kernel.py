@@ -39,10 +39,20 @@ only once numba is loaded anyway (the solver's kernel switches after
 :data:`vjm_pin.solver.kernel.JIT_AFTER_ITERATIONS` iterations: one rule for the whole package).
 ``tests/test_point_kernel.py`` compares both implementations with each other and with the
 generic path, and the analytic ``dμ/ds`` with finite differences.
+
+A curve's common step (:meth:`~vjm_pin.analysis.curve._Tracer._fused_step`) has the QR already: the
+compiled Newton corrector factors ``Jᵀ`` at the converged configuration (Householder reflectors,
+:func:`vjm_pin.solver.kernel._qr_t`). :func:`_reuse_point_loops` takes those reflectors instead of a
+second QR (and no explicit ``Q``: the reflectors are applied where ``Q`` would multiply), decides the
+rank test from ``‖R‖_F ‖R⁻¹‖_F`` where that bound clears it (the SVD of ``R`` otherwise), and packs
+its constants into two arrays (one argument each). The compiled :func:`_point_loops` factors ``J``
+with the same algorithm (:func:`_qr_reflectors`) and shares the rest (:func:`_eq28_tangent`,
+:func:`_margin_tail`): on the same ``J`` both give the same numbers.
 """
 
 from __future__ import annotations
 
+import math
 import sys
 
 import numpy as np
@@ -282,7 +292,8 @@ def _top_eigpair(a):
     """The largest eigenvalue of the symmetric (n, n) ``a`` (lower triangle read; ``a`` is
     overwritten) and a unit eigenvector, for :func:`_point_loops` (compiled with it): Householder
     tridiagonalisation ``a = Q T Qᵀ`` (``4n³/3``), bisection (by quarters) on the Sturm count
-    of ``T`` from the Gershgorin bracket to LAPACK's tolerance ``max(2ε|λ|, ε‖T‖)``, inverse
+    of ``T`` from the Gershgorin bracket until it isolates the top eigenvalue, then Newton's
+    iteration on ``det(T − λI)`` inside that bracket, to LAPACK's tolerance ``max(2ε|λ|, ε‖T‖)``, inverse
     iteration on ``T`` (partial pivoting, three solves from a fixed start) and ``Q`` applied to
     the vector — instead of every eigenpair
     (``np.linalg.eigh``): the value to a few units of ``ε‖a‖`` as LAPACK's, the vector to
@@ -351,8 +362,13 @@ def _top_eigpair(a):
         lo -= 2.0 * eps * tnorm
         hi += 2.0 * eps * tnorm
         atol = max(eps * tnorm, pivmin)  # LAPACK's (dstebz) default absolute tolerance
+        clo = 0  # eigenvalues below lo (the Gershgorin bound: none)
+        newton = False
         for _ in range(200):
             if hi - lo <= max(2.0 * eps * max(abs(lo), abs(hi)), atol):
+                break
+            if clo == n - 1:  # [lo, hi) holds the top eigenvalue alone: Newton's iteration from here
+                newton = True
                 break
             # quadrisection: three independent Sturm counts (their division chains overlap)
             w4 = 0.25 * (hi - lo)
@@ -388,12 +404,49 @@ def _top_eigpair(a):
             if c1 == n:  # every eigenvalue below s1
                 hi = s1
             elif c2 == n:
-                lo, hi = s1, s2
+                lo, hi, clo = s1, s2, c1
             elif c3 == n:
-                lo, hi = s2, s3
+                lo, hi, clo = s2, s3, c2
             else:
-                lo = s3
+                lo, clo = s3, c3
         lam = 0.5 * (lo + hi)
+        if newton:
+            # the top eigenvalue isolated in [lo, hi): Newton's iteration on det(T − λI) (its logarithmic
+            # derivative Σ q_i'/q_i from the pivots' recurrence), kept inside the bracket (bisection
+            # where a step leaves it; the bracket shrinks with every Sturm count), to the tolerance above
+            x = lam
+            for _ in range(60):
+                tol = max(2.0 * eps * max(abs(lo), abs(hi)), atol)
+                if hi - lo <= tol:
+                    x = 0.5 * (lo + hi)
+                    break
+                q = d[0] - x
+                dq = -1.0
+                if abs(q) < pivmin:
+                    q = -pivmin
+                cnt = 1 if q < 0 else 0
+                der = dq / q
+                for i in range(1, n):
+                    r = e[i - 1] * e[i - 1] / q
+                    dq = -1.0 + r * dq / q
+                    q = d[i] - x - r
+                    if abs(q) < pivmin:
+                        q = -pivmin
+                    if q < 0:
+                        cnt += 1
+                    der += dq / q
+                if cnt == n:  # every eigenvalue below x
+                    hi = x
+                else:
+                    lo = x
+                xn = x - 1.0 / der
+                if not (lo < xn < hi):
+                    xn = 0.5 * (lo + hi)
+                if abs(xn - x) <= 0.5 * tol:
+                    x = xn
+                    break
+                x = xn
+            lam = x
     # inverse iteration on T − λI (tridiagonal LU with partial pivoting, pivots floored)
     floor = max(eps * tnorm, 1e-300)
     y = np.empty(n)
@@ -467,27 +520,38 @@ def _top_eigpair(a):
     return lam, y
 
 
-def _point_loops(jfree, hz, kz, task, dt, mask, wrench, nt, use_rate, fast_rank, sing_rcond):
-    """The whole of :meth:`PointKernel.point` in one compiled call (numba, explicit loops and
-    numba's ``np.linalg``): the equilibrated inverse of eq. (28) with the regularity test of
-    :func:`~vjm_pin.solver.stiffness._inverse_if_regular`, a Householder QR of ``Jᵀ``, the
-    margin ``μ`` with its eigenvector and, with ``use_rate``, ``dμ/ds`` of
-    :meth:`PointKernel.margin_rate`. Returns ``(status, k, δx, δF, μ, dμ/ds)``; ``status`` 0
-    when every number is valid, 1 when the generic path must decide."""
-    n = jfree.shape[1]
-    m = task.shape[0]
+def _reduced(bq, uh, m, n):
+    """``Vᵀ sym(A) V`` (``n − m + 1`` square) from ``bq = Qᵀ sym(A) Q`` and ``û`` (m,), ``V = Q [[0, û], [I, 0]]``
+    (the margin's matrix of :func:`_point_loops` and :func:`_reuse_point_loops`)."""
+    dim = n - m + 1
+    red = np.empty((dim, dim))
+    for i in range(n - m):
+        for j in range(i + 1):
+            t = 0.5 * (bq[m + i, m + j] + bq[m + j, m + i])
+            red[i, j] = t
+            red[j, i] = t
+        s = 0.0
+        for a3 in range(m):
+            s += uh[a3] * 0.5 * (bq[a3, m + i] + bq[m + i, a3])
+        red[dim - 1, i] = s
+        red[i, dim - 1] = s
+    s = 0.0
+    for a3 in range(m):
+        for b3 in range(m):
+            s += uh[a3] * bq[a3, b3] * uh[b3]
+    red[dim - 1, dim - 1] = s
+    return red
+
+
+def _eq28_tangent(jac, hz, kz, dt, nt, sing_rcond, xd, fd):
+    """The tangent of eq. (29) along ``d_t`` for the point kernels (:func:`_point_loops`,
+    :func:`_reuse_point_loops`): eq. (28) in the order (F, q, θ), equilibrated as
+    ``stiffness._ruiz``, inverted, with the regularity test of
+    :func:`~vjm_pin.solver.stiffness._inverse_if_regular`; ``δx`` (θ, q order) into ``xd``, ``δF``
+    into ``fd``. Returns ``(ok, k = d_tᵀ δF)``; not ok (``xd``, ``fd`` untouched) when the test fails."""
+    m, n = jac.shape
     nq = n - nt
     e = m + n
-    xd = np.zeros(n)
-    fd = np.zeros(m)
-    nan = np.nan
-    if m == 0 or m > n:
-        return 1, nan, xd, fd, nan, nan
-    jac = np.empty((m, n))
-    for r in range(m):
-        for c in range(n):
-            jac[r, c] = jfree[task[r], c]
-    # ---- eq. (28) in the order (F, q, θ), equilibrated as stiffness._ruiz, inverted
     perm = np.empty(n, np.int64)
     for c in range(n):
         perm[c] = m + nq + c if c < nt else m + (c - nt)
@@ -521,7 +585,7 @@ def _point_loops(jfree, hz, kz, task, dt, mask, wrench, nt, use_rate, fast_rank,
             sm[i, j] = a[i, j] * (d[i] * d[j])
     inv = np.linalg.inv(sm)
     if not np.all(np.isfinite(inv)):
-        return 1, nan, xd, fd, nan, nan
+        return False, np.nan
     c1s = 0.0
     r1s = 0.0
     c1i = 0.0
@@ -541,7 +605,7 @@ def _point_loops(jfree, hz, kz, task, dt, mask, wrench, nt, use_rate, fast_rank,
         c1i = max(c1i, ci)
         r1i = max(r1i, ri)
     if not np.sqrt(c1s * r1s) * np.sqrt(c1i * r1i) * sing_rcond * 10.0 <= 1.0:
-        return 1, nan, xd, fd, nan, nan
+        return False, np.nan
     xv = np.zeros(e)
     for i in range(e):
         acc = 0.0
@@ -554,125 +618,42 @@ def _point_loops(jfree, hz, kz, task, dt, mask, wrench, nt, use_rate, fast_rank,
         k += dt[r] * xv[r]
     for c in range(n):
         xd[c] = xv[perm[c]]
-    # ---- complete QR of Jᵀ (Householder): Q = [Y Z], R (m, m)
-    w0 = jac.T.copy()
-    q = np.eye(n)
-    hv = np.zeros((n, m))  # the reflectors H_j = I − 2 v vᵀ/(vᵀv), v = hv[j:, j]: Q = H_0 ⋯ H_{m−1}
-    hvv = np.zeros(m)
-    for j in range(m):
-        nrm = 0.0
-        for i in range(j, n):
-            nrm += w0[i, j] * w0[i, j]
-        nrm = np.sqrt(nrm)
-        if nrm == 0.0:
-            return 1, nan, xd, fd, nan, nan
-        alpha = -nrm if w0[j, j] >= 0 else nrm
-        v = w0[j:, j].copy()
-        v[0] -= alpha
-        vv = 0.0
-        for i in range(v.shape[0]):
-            vv += v[i] * v[i]
-        if vv == 0.0:
-            continue
-        for i in range(v.shape[0]):
-            hv[j + i, j] = v[i]
-        hvv[j] = vv
-        for c in range(j, m):
-            s = 0.0
-            for i in range(v.shape[0]):
-                s += v[i] * w0[j + i, c]
-            s *= 2.0 / vv
-            for i in range(v.shape[0]):
-                w0[j + i, c] -= s * v[i]
-        for r in range(n):
-            s = 0.0
-            for i in range(v.shape[0]):
-                s += q[r, j + i] * v[i]
-            s *= 2.0 / vv
-            for i in range(v.shape[0]):
-                q[r, j + i] -= s * v[i]
-    rmat = np.zeros((m, m))
-    for i in range(m):
-        for j in range(i, m):
-            rmat[i, j] = w0[i, j]
-    sv = np.linalg.svd(rmat)[1]
-    if not sv.min() > fast_rank * sv.max():
+    return True, k
+
+
+def _point_loops(jfree, hz, kz, task, dt, mask, wrench, nt, use_rate, fast_rank, sing_rcond):
+    """The whole of :meth:`PointKernel.point` in one compiled call (numba, explicit loops and
+    numba's ``np.linalg``): the equilibrated inverse of eq. (28) with the regularity test of
+    :func:`~vjm_pin.solver.stiffness._inverse_if_regular` (:func:`_eq28_tangent`), a Householder QR of
+    ``Jᵀ`` (:func:`_qr_reflectors`, the corrector's own algorithm), the margin ``μ`` with its
+    eigenvector and, with ``use_rate``, ``dμ/ds`` of :meth:`PointKernel.margin_rate`
+    (:func:`_margin_tail`, shared with :func:`_reuse_point_loops`: on the same ``J`` the same numbers).
+    Returns ``(status, k, δx, δF, μ, dμ/ds)``; ``status`` 0 when every number is valid, 1 when the
+    generic path must decide."""
+    n = jfree.shape[1]
+    m = task.shape[0]
+    xd = np.zeros(n)
+    fd = np.zeros(m)
+    nan = np.nan
+    if m == 0 or m > n:
         return 1, nan, xd, fd, nan, nan
-    u = np.zeros(m)  # Rᵀ u = d_t (forward substitution)
-    for i in range(m):
-        s = dt[i]
-        for j in range(i):
-            s -= rmat[j, i] * u[j]
-        u[i] = s / rmat[i, i]
-    # V = [Z, y₀/‖y₀‖] = Q [[0, û], [I, 0]] (y₀ = Y u, û = u/‖u‖): Vᵀ A V from QᵀAQ, the m
-    # reflectors applied on both sides of A (4mn² instead of the products with V, 4n³)
-    nu = 0.0
-    for j in range(m):
-        nu += u[j] * u[j]
-    nu = np.sqrt(nu)
-    uh = np.empty(m)
-    for j in range(m):
-        uh[j] = u[j] / nu
-    dim = n - m + 1
-    asym = np.empty((n, n))
-    for i in range(n):
-        for j in range(n):
-            asym[i, j] = 0.5 * (hz[i, j] + hz[j, i]) - kz[i, j]
-    bq = asym.copy()
-    for j in range(m):
-        if hvv[j] == 0.0:
-            continue
-        beta = 2.0 / hvv[j]
-        for c in range(n):  # H_j from the left
-            s = 0.0
-            for i in range(j, n):
-                s += hv[i, j] * bq[i, c]
-            s *= beta
-            for i in range(j, n):
-                bq[i, c] -= s * hv[i, j]
-        for r in range(n):  # and from the right
-            s = 0.0
-            for i in range(j, n):
-                s += bq[r, i] * hv[i, j]
-            s *= beta
-            for i in range(j, n):
-                bq[r, i] -= s * hv[i, j]
-    red = np.empty((dim, dim))
-    for i in range(n - m):
-        for j in range(i + 1):
-            t = 0.5 * (bq[m + i, m + j] + bq[m + j, m + i])
-            red[i, j] = t
-            red[j, i] = t
-        s = 0.0
-        for a3 in range(m):
-            s += uh[a3] * 0.5 * (bq[a3, m + i] + bq[m + i, a3])
-        red[dim - 1, i] = s
-        red[i, dim - 1] = s
-    s = 0.0
-    for a3 in range(m):
-        for b3 in range(m):
-            s += uh[a3] * bq[a3, b3] * uh[b3]
-    red[dim - 1, dim - 1] = s
-    mu, top = _top_eigpair(red)
-    if not use_rate:
-        return 0, k, xd, fd, mu, nan
-    w = np.zeros(n)  # V top = Z top[:n−m] + Y û top[−1]
-    for r in range(n):
-        s = 0.0
-        for c in range(n - m):
-            s += q[r, m + c] * top[c]
-        for j in range(m):
-            s += q[r, j] * uh[j] * top[dim - 1]
-        w[r] = s
-    # ---- dμ/ds = wᵀH'w − 2 gᵀJ'w (PointKernel.margin_rate)
-    res = asym @ w - mu * w
-    yr = np.zeros(m)
-    for j in range(m):
-        s = 0.0
-        for r in range(n):
-            s += q[r, j] * res[r]
-        yr[j] = s
-    g = _back_substitute(rmat, yr, m)  # R g = Yᵀ res
+    jac = np.empty((m, n))
+    for r in range(m):
+        for c in range(n):
+            jac[r, c] = jfree[task[r], c]
+    ok, k = _eq28_tangent(jac, hz, kz, dt, nt, sing_rcond, xd, fd)
+    if not ok:
+        return 1, nan, xd, fd, nan, nan
+    hh = _qr_reflectors(jac, m, n)
+    st, mu, rate = _margin_tail(jfree, hh, hz, kz, task, dt, mask, wrench, use_rate, fast_rank, xd, fd)
+    return st, k, xd, fd, mu, rate
+
+
+def _rate_value(jfree, mask, wrench, task, xd, fd, w, g):
+    """``dμ/ds = wᵀH'w − 2 gᵀJ'w`` (:meth:`PointKernel.margin_rate`) for the point kernels, from the
+    free columns ``jfree`` (6, n) of the frame Jacobian, their support ``mask``, the wrench, the
+    tangent ``(δx, δF)``, the unit eigenvector ``w`` of ``μ`` and the multiplier ``g``."""
+    n = jfree.shape[1]
     li, om = _twists(jfree)
     dom = np.empty((n, 3))
     dli = np.empty((n, 3))
@@ -707,7 +688,7 @@ def _point_loops(jfree, hz, kz, task, dt, mask, wrench, nt, use_rate, fast_rank,
                 hd += om[i, 0] * db[j, 0] + om[i, 1] * db[j, 1] + om[i, 2] * db[j, 2]
             acc += hd * w[j]
         quad += w[i] * acc
-    return 0, k, xd, fd, mu, quad - 2.0 * _rate_lin(dli, dom, w, g, task)
+    return quad - 2.0 * _rate_lin(dli, dom, w, g, task)
 
 
 def _scaled_diff(a, b, free, vscale):
@@ -771,6 +752,231 @@ def _fused_point_loops(x, x_pred, limit, free, vscale, j6, hz, kz, task, dt, mas
     return 0, k, mu, rate
 
 
+def _householder_r(hh, m):
+    """The triangle ``R`` (m, m) of the reflectors ``hh`` of :func:`vjm_pin.solver.kernel._qr_t` (row k of
+    ``hh``: column k of ``Jᵀ`` reduced; ``R[i, j] = hh[j, i]``, ``j ≥ i``)."""
+    rmat = np.zeros((m, m))
+    for i in range(m):
+        for j in range(i, m):
+            rmat[i, j] = hh[j, i]
+    return rmat
+
+
+def _q_vector(hh, v, m, n, transposed):
+    """``Qᵀ v`` (``transposed``) or ``Q v`` in place, ``Q = H_0 ⋯ H_{m−1}`` from the reflectors ``hh``
+    (``H_k = I − τ_k v_k v_kᵀ``, ``v_k[k] = 1``, ``v_k[i] = hh[k, i]`` for ``i > k``, ``τ_k = hh[m, k]``)."""
+    for kk in range(m):
+        k = kk if transposed else m - 1 - kk
+        t = hh[m, k]
+        if t == 0.0:
+            continue
+        s = v[k]
+        for i in range(k + 1, n):
+            s += hh[k, i] * v[i]
+        s *= t
+        v[k] -= s
+        for i in range(k + 1, n):
+            v[i] -= s * hh[k, i]
+
+
+def _q_both_sides(hh, a, m, n):
+    """``a ← Qᵀ a Q`` in place for an (n, n) ``a`` (the reflectors of :func:`_q_vector`; row operations
+    from the left, then on every row from the right)."""
+    s = np.empty(n)
+    for k in range(m):
+        t = hh[m, k]
+        if t == 0.0:
+            continue
+        for c in range(n):
+            s[c] = a[k, c]
+        for i in range(k + 1, n):
+            v = hh[k, i]
+            for c in range(n):
+                s[c] += v * a[i, c]
+        for c in range(n):
+            s[c] *= t
+            a[k, c] -= s[c]
+        for i in range(k + 1, n):
+            v = hh[k, i]
+            for c in range(n):
+                a[i, c] -= s[c] * v
+    for r in range(n):
+        for k in range(m):
+            t = hh[m, k]
+            if t == 0.0:
+                continue
+            sr = a[r, k]
+            for i in range(k + 1, n):
+                sr += a[r, i] * hh[k, i]
+            sr *= t
+            a[r, k] -= sr
+            for i in range(k + 1, n):
+                a[r, i] -= sr * hh[k, i]
+
+
+def _qr_reflectors(jac, m, n):
+    """Householder QR of ``Jᵀ`` (n × m) as the corrector's compiled kernel factors it
+    (:func:`vjm_pin.solver.kernel._qr_t`, dgeqr2 / dlarfg, the same operations): row k of the result
+    is column k of ``Jᵀ`` reduced, then the reflector ``v_k`` (``v_k[k] = 1`` implicit); row m holds
+    the ``τ_k`` (:func:`_q_vector`)."""
+    hh = np.zeros((m + 1, n))
+    hh[:m, :] = jac
+    for k in range(m):
+        alpha = hh[k, k]
+        xn2 = 0.0
+        for i in range(k + 1, n):
+            xn2 += hh[k, i] * hh[k, i]
+        xnorm = math.sqrt(xn2)
+        if xnorm == 0.0:
+            hh[m, k] = 0.0
+        else:
+            beta = -math.copysign(math.hypot(alpha, xnorm), alpha)
+            t = (beta - alpha) / beta
+            hh[m, k] = t
+            scal = 1.0 / (alpha - beta)
+            for i in range(k + 1, n):
+                hh[k, i] *= scal
+            hh[k, k] = beta
+            for j in range(k + 1, m):  # apply H_k to the remaining columns of Jᵀ
+                s = hh[j, k]
+                for i in range(k + 1, n):
+                    s += hh[j, i] * hh[k, i]
+                s *= t
+                hh[j, k] -= s
+                for i in range(k + 1, n):
+                    hh[j, i] -= s * hh[k, i]
+    return hh
+
+
+def _margin_tail(jfree, hh, hz, kz, task, dt, mask, wrench, use_rate, fast_rank, xd, fd):
+    """The margin ``μ`` and, with ``use_rate``, ``dμ/ds`` of the point kernels (:func:`_point_loops`,
+    :func:`_reuse_point_loops`) from the reflectors ``hh`` of ``Jᵀ`` (:func:`_qr_reflectors`) and the
+    tangent ``(xd, fd)``: the rank test of ``J`` (:data:`FAST_RANK`; from ``‖R‖_F ‖R⁻¹‖_F ≥ σ_max/σ_min``
+    where that bound clears it, else the singular values of ``R``), ``Vᵀ sym(H − K) V`` from ``QᵀAQ``
+    (the m reflectors applied on both sides of ``A``: ``4mn²`` instead of the products with ``V``),
+    its largest eigenpair (:func:`_top_eigpair`) and :func:`_rate_value`. Returns ``(status, μ, dμ/ds)``:
+    status 1 when ``J`` is not safely of full rank (the generic path decides)."""
+    nan = np.nan
+    m = task.shape[0]
+    n = hz.shape[0]
+    rmat = _householder_r(hh, m)
+    # σ_max ≤ ‖R‖_F, 1/σ_min ≤ ‖R⁻¹‖_F: the rank test without an SVD where the bound clears it
+    rinv = np.zeros((m, m))
+    nr = 0.0
+    for i in range(m):
+        for j in range(i, m):
+            nr += rmat[i, j] * rmat[i, j]
+    for c in range(m):  # column c of R⁻¹ (back substitution of e_c)
+        for i in range(c, -1, -1):
+            s = 1.0 if i == c else 0.0
+            for j in range(i + 1, c + 1):
+                s -= rmat[i, j] * rinv[j, c]
+            rinv[i, c] = s / rmat[i, i]
+    ni = 0.0
+    for i in range(m):
+        for j in range(i, m):
+            ni += rinv[i, j] * rinv[i, j]
+    if not fast_rank * (np.sqrt(nr) * np.sqrt(ni)) < 0.5:
+        for i in range(m):
+            for j in range(i, m):
+                if not np.isfinite(rmat[i, j]):
+                    return 1, nan, nan
+        sv = np.linalg.svd(rmat)[1]
+        if not sv.min() > fast_rank * sv.max():
+            return 1, nan, nan
+    u = np.zeros(m)  # Rᵀ u = d_t (forward substitution): y₀ = Y u
+    for i in range(m):
+        s = dt[i]
+        for j in range(i):
+            s -= rmat[j, i] * u[j]
+        u[i] = s / rmat[i, i]
+    nu = 0.0
+    for j in range(m):
+        nu += u[j] * u[j]
+    nu = np.sqrt(nu)
+    uh = np.empty(m)
+    for j in range(m):
+        uh[j] = u[j] / nu
+    dim = n - m + 1
+    asym = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            asym[i, j] = 0.5 * (hz[i, j] + hz[j, i]) - kz[i, j]
+    bq = asym.copy()
+    _q_both_sides(hh, bq, m, n)
+    mu, top = _top_eigpair(_reduced(bq, uh, m, n))
+    if not use_rate:
+        return 0, mu, nan
+    w = np.empty(n)  # V top = Q [û top[−1]; top[:n−m]]
+    for j in range(m):
+        w[j] = uh[j] * top[dim - 1]
+    for c in range(n - m):
+        w[m + c] = top[c]
+    _q_vector(hh, w, m, n, False)
+    res = asym @ w - mu * w
+    _q_vector(hh, res, m, n, True)  # Yᵀ res: its first m entries
+    g = _back_substitute(rmat, res, m)  # R g = Yᵀ res
+    return 0, mu, _rate_value(jfree, mask, wrench, task, xd, fd, w, g)
+
+
+def _reuse_point_loops(x, x_pred, limit, j6, hh, hz, f6, ci, cfl, kz, mask, out):
+    """The fused step's point (:func:`_fused_point_loops`) on the factorisation of the converged Newton
+    iteration itself: the Householder reflectors ``hh`` of ``Jᵀ`` (:func:`vjm_pin.solver.kernel._qr_t`,
+    the ``fact[1]`` of the corrector's compiled kernel), ``hz`` = ``H(F)`` and ``f6`` = ``F`` at the same
+    configuration ``x`` whose frame Jacobian is ``j6`` (6, nq). No second QR, no explicit ``Q``; the
+    rank test of ``J`` (:data:`FAST_RANK`) from ``‖R‖_F ‖R⁻¹‖_F ≥ σ_max/σ_min`` where that bound clears
+    it, else the singular values of ``R`` as :func:`_point_loops`; the tangent of eq. (29) by
+    :func:`_eq28_tangent` (the same numbers). ``μ`` and ``dμ/ds`` are those of :func:`_point_loops` to
+    rounding (another QR of the same ``Jᵀ``: another basis of the same subspaces).
+
+    The constants packed (one argument each instead of eleven): ``ci`` (int) = ``[n, nθ, m, use_rate,
+    free (n), task (m)]``, ``cfl`` (float) = ``[fast_rank, sing_rcond, d (6), d_t (m), vscale (n)]``; ``out``
+    (nq + 6,): the tangent ``(δx, δF)`` laid out as ``x_dot`` (nq,) then ``w_dot`` (6,). Returns
+    ``(status, k, μ, dμ/ds, dᵀF)``: as :func:`_fused_point_loops` (status −1: the corrector strayed,
+    nothing else done; 1: the kernel declines; 0: every number valid) and the force along ``d`` of
+    the wrench ``F`` given as ``f6`` (``Σ dᵢFᵢ`` in order)."""
+    nan = np.nan
+    n, nt, m = ci[0], ci[1], ci[2]
+    use_rate = ci[3] != 0
+    free = ci[4:4 + n]
+    task = ci[4 + n:4 + n + m]
+    fast_rank, sing_rcond = cfl[0], cfl[1]
+    dt = cfl[8:8 + m]
+    vscale = cfl[8 + m:8 + m + n]
+    corr = _scaled_diff(x, x_pred, free, vscale)
+    if not corr <= limit:
+        return -1, nan, nan, nan, nan
+    force = 0.0
+    for i in range(6):
+        force += cfl[2 + i] * f6[i]
+    if m == 0 or m > n:
+        return 1, nan, nan, nan, force
+    jfree = np.empty((6, n))
+    for a_ in range(6):
+        for b in range(n):
+            jfree[a_, b] = j6[a_, free[b]]
+    jac = np.empty((m, n))
+    for r in range(m):
+        for c in range(n):
+            jac[r, c] = jfree[task[r], c]
+    xd = np.zeros(n)
+    fd = np.zeros(m)
+    ok, k = _eq28_tangent(jac, hz, kz, dt, nt, sing_rcond, xd, fd)
+    if not ok:
+        return 1, nan, nan, nan, force
+    st, mu, rate = _margin_tail(jfree, hh, hz, kz, task, dt, mask, f6, use_rate, fast_rank, xd, fd)
+    if st:
+        return 1, nan, nan, nan, force
+    nq = out.shape[0] - 6
+    for i in range(nq + 6):
+        out[i] = 0.0
+    for c in range(n):
+        out[free[c]] = xd[c]
+    for r in range(m):
+        out[nq + task[r]] = fd[r]
+    return 0, k, mu, rate, force
+
+
 #: numba options of this module's compiled functions: numpy's error model (a division by zero gives
 #: inf or NaN, which the status tests decline, instead of raising and an extra test in every division
 #: loop; the numbers are otherwise the same).
@@ -778,6 +984,10 @@ _NJIT = {"nogil": True, "error_model": "numpy"}
 _point_jit = _point_loops  # the point kernel :func:`_fused_point_loops` calls (compiled by compiled())
 _fused = None  # the compiled (_predict_loops, _fused_point_loops, _scaled_diff) once loaded (compiled())
 _compiled = None  # the compiled _point_loops once loaded, False when numba is unavailable
+_reuse = None  # the compiled _reuse_point_loops once loaded (compiled())
+#: This module's njit helpers, compiled (before the kernels that call them) by compiled().
+_OWN_HELPERS = ("_top_eigpair", "_eq28_tangent", "_reduced", "_rate_value", "_householder_r", "_q_vector",
+                "_q_both_sides", "_qr_reflectors", "_margin_tail")
 
 
 def _jit_mode() -> str:
@@ -804,11 +1014,12 @@ def compiled():
             chain_kernel._load()  # the dμ/ds helpers shared with the chain kernel, compiled there
             for name in chain_kernel.RATE_HELPERS:
                 g[name] = getattr(chain_kernel, name)
-            g["_top_eigpair"] = numba.njit(cache=True, **_NJIT)(_top_eigpair)
+            for name in _OWN_HELPERS:
+                g[name] = numba.njit(cache=True, **_NJIT)(g[name])
             _compiled = numba.njit(cache=True, **_NJIT)(_point_loops)
             _fused_load(numba, {"cache": True, **_NJIT})
         except RuntimeError:  # no writable cache location: compile in memory
-            for name in ("_top_eigpair", *chain_kernel.RATE_HELPERS):
+            for name in (*_OWN_HELPERS, *chain_kernel.RATE_HELPERS):
                 fn = g[name]
                 g[name] = numba.njit(**_NJIT)(getattr(fn, "py_func", fn))
             _compiled = numba.njit(**_NJIT)(_point_loops)
@@ -818,7 +1029,7 @@ def compiled():
 
 def _fused_load(numba, opts) -> None:
     """Compile the fused step's helpers (:func:`fused`) with the compiled point kernel."""
-    global _fused, _point_jit
+    global _fused, _point_jit, _reuse
     _point_jit = _compiled
     g = globals()
     sd = g["_scaled_diff"] = numba.njit(**opts)(getattr(_scaled_diff, "py_func", _scaled_diff))
@@ -827,6 +1038,7 @@ def _fused_load(numba, opts) -> None:
         numba.njit(**opts)(getattr(_fused_point_loops, "py_func", _fused_point_loops)),
         sd,
     )
+    _reuse = numba.njit(**opts)(getattr(_reuse_point_loops, "py_func", _reuse_point_loops))
 
 
 def fused():
@@ -836,6 +1048,14 @@ def fused():
     if _fused is None:
         compiled()
     return _fused or None
+
+
+def reuse():
+    """The compiled :func:`_reuse_point_loops` (the fused step's point on the corrector's own QR),
+    loaded with :func:`compiled`; None when numba cannot be imported."""
+    if _fused is None:
+        compiled()
+    return _reuse or None
 
 
 def use_compiled(points_so_far: int) -> bool:

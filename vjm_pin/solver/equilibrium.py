@@ -46,7 +46,11 @@ result's ``x``) takes a lean path (:meth:`EquilibriumSolver._solve_lean`): the s
 iterations and results bit for bit, without the general set-up (the kernel context is kept
 between solves, the compiled kernel is called directly with its buffers, the result is built
 once); for models of order ≤ :data:`~vjm_pin.solver.stability.SCIPY_LAPACK_MAX_N` it also runs
-without the BLAS thread limit, as OpenBLAS uses one thread at these orders.
+without the BLAS thread limit, as OpenBLAS uses one thread at these orders. With the compiled
+kernel on a chain of 1-DoF joints the plain local iteration runs as one compiled call, its end
+placement, frame Jacobian and ``log3`` by :mod:`vjm_pin.kinematics.compiled_chain` (Pinocchio's to
+rounding), and so does each least-energy restoration (:meth:`EquilibriumSolver._restore`); the numpy
+twin keeps Pinocchio.
 
 Every iterate's coordinates smaller than :data:`~vjm_pin.kinematics.chain.FLUSH_BELOW` (1e-150) are
 set to exactly zero (:func:`~vjm_pin.kinematics.chain.flush_tiny`): on a straight column they would
@@ -186,10 +190,24 @@ _fused_enabled = True
 #: read (:class:`~vjm_pin.solver.stability.SpectrumLater`); False computes them at every point (the
 #: same numbers; for the tests and the benchmark).
 _corrector_defer = True
+#: Private switch of the compiled kinematics of the compiled kernel (:mod:`vjm_pin.kinematics.compiled_chain`,
+#: :meth:`EquilibriumSolver._compiled_chain`): False keeps Pinocchio's (for the tests and the benchmark).
+_compiled_kinematics = True
 #: Placeholder factorisation arrays of a fused-kernel call that computes its own (one array type
 #: for the compiled kernel), then an empty Jacobian for a call that reuses a cached one.
 _KERNEL_DUMMY = (np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 0)), np.zeros(0), np.zeros(0), np.zeros(0),
                  np.zeros((0, 0)), np.zeros(0), np.zeros((6, 0)))
+_NO_KEY = np.frombuffer(b"")  # no kept equilibrium (a read-only empty configuration; _fused_looped)
+
+
+class _Placement:
+    """The end rotation of a compiled kinematics evaluation where :meth:`_fused_iterations` reads
+    ``data.oMf[fid].rotation``."""
+
+    __slots__ = ("rotation",)
+
+    def __init__(self, rotation):
+        self.rotation = rotation
 
 
 @dataclass(frozen=True)
@@ -436,6 +454,15 @@ def _prismatic_columns(model: pin.Model) -> np.ndarray:
     return prism
 
 
+#: ``np.triu(np.ones((m, m)))`` for the task sizes m = 0…6 (:func:`_triu_ones`).
+_TRIU = tuple(np.triu(np.ones((m, m))) for m in range(7))
+
+
+def _triu_ones(m: int) -> np.ndarray:
+    """A new ``np.triu(np.ones((m, m)))`` (a copy of a kept one: ~20 µs less per solver)."""
+    return _TRIU[m].copy() if m < len(_TRIU) else np.triu(np.ones((m, m)))
+
+
 class EquilibriumSolver:
     """Solves eq. (5) for one model; keeps a Pinocchio ``Data`` and the reference pose.
 
@@ -496,12 +523,13 @@ class EquilibriumSolver:
         self.task = list(vm.task)
         self.free = np.concatenate([vm.theta_idx, vm.q_idx]).astype(int)
         self.nt = vm.n_theta
-        pin.forwardKinematics(vm.model, self.kin.data, vm.reference)
-        pts = np.array([m.translation for m in self.kin.data.oMi[1:]] + [self.p0])
+        # the joint placements at the reference: placement() has just run the forward kinematics
+        # there; tolist() reads them without one binding call per index (~2× faster at 148 joints)
+        pts = np.concatenate([m.translation for m in self.kin.data.oMi.tolist()[1:]] + [self.p0]).reshape(-1, 3)
         self.length_scale = max(float(np.sqrt(((pts - self.p0) ** 2).sum(axis=1)).max()), 1e-3)
         prism = _prismatic_columns(vm.model)
         self.var_scale = np.where(prism[self.free], self.length_scale, 1.0)
-        self.kscale = float(np.abs(vm.K_theta).max())
+        self.kscale = float(max(vm.K_theta.max(), -vm.K_theta.min()))  # max|K_θ| without a temporary
         # per-task-row scale of pose errors (m rows by L_c, rad rows by 1), and the row groups
         self._err_scale = np.where(np.array(self.task) < 3, self.length_scale, 1.0)
         self._rows_p = [i for i, t in enumerate(self.task) if t < 3]
@@ -521,7 +549,7 @@ class EquilibriumSolver:
         self._task_idx = np.array(self.task, int)
         self._partial_task_rotation = bool(self._partial_rotation(self.task))  # see _rotation_targets
         self._ir = np.array(self._rows_r, int)
-        self._triu = np.triu(np.ones((len(self.task),) * 2))
+        self._triu = _triu_ones(len(self.task))
         t = self.task
         contiguous = bool(t) and t == list(range(t[0], t[-1] + 1))
         self._task_rows = slice(t[0], t[-1] + 1) if contiguous else np.array(t, int)
@@ -718,6 +746,12 @@ class EquilibriumSolver:
         Pinocchio call (frame Jacobian and end placement) and one call of the fused kernel
         (:mod:`vjm_pin.solver.kernel`), with the same iterates, tests, caches and results
         (:meth:`_fused_iterations`, with ``VJM_PIN_JIT`` read now and the kernel's own call)."""
+        ctx = self._lean_context()
+        if ctx is not None and ctx[5] is not None and _compiled_kinematics:
+            # the compiled kernel's direct call: the whole iteration in one compiled call with the
+            # compiled kinematics where the chain allows (_fused_iterations), its context kept
+            raw = self._fused_iterations(ctx, p_t, r_t, x, eager=True)  # (eigenvalues now, as below)
+            return None if raw is None else raw[:4]
         consts, thr = self._kernel_consts()
         consts = _kernel.with_target(consts, np.asarray(p_t, float))
         raw = self._fused_iterations([None, consts, consts[1], thr, _kernel.get(), None, None], p_t, r_t, x)
@@ -787,7 +821,7 @@ class EquilibriumSolver:
         self._fast_its = 0
         return self._fused_iterations(ctx, p_t, r_t, x, flushed)
 
-    def _fused_iterations(self, ctx, p_t, r_t, x, flushed: bool = False, relaxed: int = 0):
+    def _fused_iterations(self, ctx, p_t, r_t, x, flushed: bool = False, relaxed: int = 0, eager: bool = False):
         """The fused local iteration of :meth:`_fast_newton_fused` and :meth:`_corrector` from ``x``
         towards the target ``(p_t, r_t)``: per iteration one Pinocchio call (frame Jacobian and end
         placement, none on a warm start from the equilibrium this solver just found) and one call
@@ -808,32 +842,43 @@ class EquilibriumSolver:
 
         ``relaxed`` (a number of steps, 0: off): steps are not required to halve the residual (still
         a positive definite reduced matrix, within the step limit), at most ``relaxed`` of them; for
-        :meth:`_relaxed_local` only."""
+        :meth:`_relaxed_local` only. ``eager``: the eigenvalues of a verdict computed now whatever
+        ``ctx`` lets the direct call certify (:meth:`_fast_newton_fused` in the lean context).
+
+        With the compiled kernel on a chain of 1-DoF joints the kinematics are compiled too
+        (:meth:`_compiled_chain`, :mod:`vjm_pin.kinematics.compiled_chain`: no Pinocchio or ``log3``
+        binding call), and with the direct call the whole loop is one compiled call
+        (:meth:`_fused_looped`): the same iterates, tests, caches and result layout."""
         chain, kernel = _chain, _kernel
         kin, m, n = self.kin, len(self.task), len(self.free)
         _, consts, cf, thr, step_fn, direct = ctx[:6]
-        model, fid, data = kin.model, kin.frame_id, None  # data: kin.data when first needed
         pt = np.asarray(p_t, float)
         rt = np.asarray(r_t, float)
         cf[9:12] = pt  # kernel.with_target
         rot = self._ir.size > 0
         flush = bool(chain._flush_enabled)
+        x = np.array(x, dtype=float)
+        if not flushed:
+            fact = self._fast_fact
+            if fact is None or fact[0] != x.tobytes():  # (the last equilibrium is flushed already)
+                flush_tiny(x)
+        # the compiled kernel's kinematics: compiled too (kinematics/compiled_chain.py) where the chain
+        # applies; the whole iteration in one compiled call with the direct call (_fused_looped)
+        ck = self._compiled_chain(ctx) if getattr(step_fn, "dispatcher", None) is not None else None
+        if ck is not None and direct is not None and ck[0] is not None:
+            return self._fused_looped(ctx, ck, x, p_t, r_t, pt, rt, rot, flush, relaxed, eager)
+        model, fid, data = kin.model, kin.frame_id, None  # data: kin.data when first needed
         lwa = pin.LOCAL_WORLD_ALIGNED
         zero3 = self._zero3  # (read only)
         dummy = _KERNEL_DUMMY
         ci = consts[0]
         if direct is not None:
             lean, kz, mask, theta0, vscale, escale = direct
-            defer = len(ctx) > 7 and ctx[7]
+            defer = len(ctx) > 7 and ctx[7] and not eager
         cond = None
         cont_, polish_, conv_ = kernel.CONTINUE, kernel.POLISH, kernel.CONVERGED
         kkt_prev = np.inf
         polish = 0
-        x = np.array(x, dtype=float)
-        if not flushed:
-            fact = self._fast_fact
-            if fact is None or fact[0] != x.tobytes():  # (the last equilibrium is flushed already)
-                flush_tiny(x)
         mo = None
         for it in range(self._fast_max_iter + 1 + POLISH_ITERATIONS):
             key = x.tobytes()
@@ -844,6 +889,11 @@ class EquilibriumSolver:
                 st = fact[2]
                 kf = fact[3:11]  # (jac, qf, rr, f, r, tau, hz, f6), read only
                 j6, pos, rotm, refactor = dummy[8], st.position, st.rotation, False
+            elif ck is not None:  # the compiled forward kinematics (as _fused_looped)
+                j6, pos, rotm = np.empty((6, model.nv)), np.empty(3), np.empty((3, 3))
+                ck[1](x, ck[3], ck[4], j6, pos, rotm)
+                mo = _Placement(rotm)
+                st, kf, refactor = None, dummy[:8], True
             else:
                 if data is None:
                     data = kin.data
@@ -853,7 +903,13 @@ class EquilibriumSolver:
                 mo = data.oMf[fid]
                 pos, rotm = mo.translation, (mo.rotation if rot else None)
                 st, kf, refactor = None, dummy[:8], True
-            erot = pin.log3(rt @ rotm.T) if rot else zero3
+            if ck is not None:
+                erot = zero3
+                if rot:
+                    erot = np.empty(3)
+                    ck[2](rt if rt.flags.c_contiguous else np.ascontiguousarray(rt), rotm, erot)
+            else:
+                erot = pin.log3(rt @ rotm.T) if rot else zero3
             if direct is not None:  # the compiled kernel, its arrays into the buffers (kernel.lean)
                 xout, ws = ctx[6]
                 status, kkt, ep, er, rs = lean(
@@ -912,6 +968,101 @@ class EquilibriumSolver:
             x = xn
             kkt_prev = kkt
         return None
+    def _compiled_chain(self, ctx):
+        """``(whole-iteration call or None, forward, rotation_error, geo, jinfo)``: the compiled kinematics
+        of :mod:`vjm_pin.kinematics.compiled_chain` for this solver's chain and the compiled local
+        iteration (:func:`vjm_pin.solver.kernel.looped`), kept in ``ctx`` (its ninth item); None when the
+        model is not a chain of 1-DoF joints or numba is missing (Pinocchio then)."""
+        if len(ctx) > 8:
+            return ctx[8]
+        if not _compiled_kinematics:
+            return None
+        while len(ctx) < 8:  # (a context without the eighth item: _fast_newton_fused)
+            ctx.append(False)
+        kin = self.kin
+        got = self.__dict__.get("_ckin")
+        if got is None or got[0] is not kin:
+            from vjm_pin.kinematics import compiled_chain
+
+            # (a Kinematics whose evaluation is its own, e.g. a finite-difference baseline, keeps it)
+            own = type(kin).evaluate is not Kinematics.evaluate
+            table = None if own else compiled_chain.chain_table(kin.model, kin.frame_id)
+            fns = compiled_chain.compiled() if table is not None else None
+            got = self._ckin = (kin, None if fns is None else (fns[0], fns[2], table.geo, table.jinfo))
+        ck = None
+        if got[1] is not None:
+            ck = (_kernel.looped(),) + got[1]
+        ctx.append(ck)
+        return ck
+
+    def _fused_looped(self, ctx, ck, x, p_t, r_t, pt, rt, rot, flush, relaxed, eager=False):
+        """:meth:`_fused_iterations` with the direct call and the compiled kinematics: the whole local
+        iteration in one compiled call (:func:`vjm_pin.solver.kernel._iterations_into`: the same
+        iterates, tests and verdicts as the loop of :meth:`_fused_iterations`), then the same caches
+        and result."""
+        kernel, kin = _kernel, self.kin
+        _, consts, cf, thr, step_fn, direct = ctx[:6]
+        _, kz, mask, theta0, vscale, escale = direct
+        defer = bool(len(ctx) > 7 and ctx[7]) and not eager
+        model = kin.model
+        nq = model.nq
+        xout, ws = ctx[6]
+        kbuf = ctx[9] if len(ctx) > 9 else None
+        if kbuf is None:
+            kbuf = (np.empty((6, model.nv)), np.empty(3), np.empty((3, 3)))
+            ctx.append(kbuf)
+        fact = self._fast_fact
+        dummy = _KERNEL_DUMMY
+        if fact is not None and fact[1] is kin and fact[-1] is step_fn:
+            kx, have, kf, kpos, krot = np.frombuffer(fact[0]), True, fact[3:11], fact[2].position, fact[2].rotation
+        else:  # (kx read only, as np.frombuffer's: one compiled signature)
+            kx, have, kf, kpos, krot = _NO_KEY, False, dummy[:8], dummy[3], dummy[0]
+        lim = self._loop_limits(relaxed)
+        if not rt.flags.c_contiguous:
+            rt = np.ascontiguousarray(rt)
+        code, it, counted, _, ep, er, rs, reused = ck[0](
+            x, kx, have, kf, kpos, krot, ck[3], ck[4], rt, rot, flush, consts[0], cf, kz, mask, theta0, vscale,
+            escale, xout, ws, kbuf, thr, defer, lim)
+        if counted >= 0:
+            self._fast_its = counted
+        if code != kernel.DONE:
+            return None
+        x = xout.copy()
+        key = x.tobytes()
+        kf, ev, sym, info = ws[:8], ws[8], ws[9], ws[10]
+        ctx[6] = kernel.workspace(consts[0], nq)  # the buffers now belong to the caches: fresh ones
+        n, m = len(self.free), len(self.task)
+        if info[0]:  # stable, certified: the eigenvalues when first read
+            ev = None
+            stab = SpectrumLater(True, n - m, thr, sym, kernel.spectrum)
+        else:
+            stab = None
+        jac, qf, rr, f, r, tau, hz, f6 = kf
+        if reused:
+            st = fact[2]
+        else:
+            st = _built(KinematicState, {"position": kbuf[1].copy(), "rotation": kbuf[2].copy(),
+                                         "jacobian": kbuf[0].copy(), "hessian": None})
+            kin._last = (key, st)  # kin.evaluate(x, hessian=False) at this point: no Pinocchio call
+        if stab is None:
+            stable = bool(ev.size == 0 or ev[-1] < -thr)  # (ascending)
+            stab = self._kernel_stability(stable, ev, n - m, thr, jac, hz, st)
+        res = {"position": float(ep), "orientation": float(er), "statics": float(rs)}
+        wkey = key + f6.tobytes()
+        self._fast_cache = (wkey + pt.tobytes() + rt.tobytes(), res, stab, x, f, f6, p_t, r_t)
+        self._fast_fact = (key, kin, st, jac, qf, rr, f, r, tau, hz, f6, step_fn)
+        self._fast_cond = (key, info[1])
+        remember_lazy(self.vm, kin, wkey, _blocks_builder(jac, hz, self.nt, self.vm.K_theta, st))
+        return x, f, it, st, kf, ev, res, stab
+
+    def _loop_limits(self, relaxed):
+        """``(max_iter, polish steps, relaxed steps)`` of :func:`vjm_pin.solver.kernel._iterations_into`."""
+        lim = self.__dict__.get("_lim")
+        key = (self._fast_max_iter, relaxed)
+        if lim is None or lim[0] != key:
+            lim = self._lim = (key, np.array([self._fast_max_iter, POLISH_ITERATIONS, relaxed], np.int64))
+        return lim[1]
+
     def _corrector_result(self, raw, p_t, r_t, path: str = "newton+tangent-predictor") -> EquilibriumResult:
         """The :class:`EquilibriumResult` of a converged :meth:`_corrector` (what :meth:`_result`
         builds from the fused iteration's convergence): the fields of :meth:`_pack`, the ones derived
@@ -1241,6 +1392,21 @@ class EquilibriumSolver:
         if step is not None:  # the compiled step (kernel._restore_step): the same iteration
             pt = np.asarray(p_t, float)
             flush, zero3, nq = bool(_chain._flush_enabled), self._zero3, x.shape[0]
+            ck = self._compiled_chain([]) if state is None else None
+            loop = _kernel.restore_looped() if ck is not None else None
+            if loop is not None:  # the whole restoration with the compiled kinematics: one call
+                kbuf = (np.empty((6, kin.model.nv)), np.empty(3), np.empty((3, 3)))
+                xo = np.empty(nq)
+                rt = np.ascontiguousarray(r_t, dtype=float)
+                status, _ = loop(np.ascontiguousarray(x, dtype=float), ck[3], ck[4], rt, rot, task, free, minv, escale,
+                                 vscale, pt, lim, max_step, flush, max_iter, xo, kbuf)
+                state = _built(KinematicState, {"position": kbuf[1], "rotation": kbuf[2], "jacobian": kbuf[0],
+                                                "hessian": None})
+                kin._last = (xo.tobytes(), state)  # kin.evaluate(xo, hessian=False): no Pinocchio call
+                if status != 0:
+                    return xo, state, status == 1
+                e = pose_error(p_t, r_t, state.position, state.rotation)[self.task]
+                return xo, state, bool(np.abs(e).max() <= max(tol_p, self.tol))
             for _ in range(max_iter + 1):
                 if state is None:
                     state = kin.evaluate(x, hessian=False)

@@ -44,8 +44,12 @@ algorithm in plain numpy so the package works where numba does not (``VJM_PIN_JI
 numba missing), and ``cache=True`` stores the machine code next to this file so only the
 first run on a machine compiles (65–90 s measured on the loaded 2-core test machine); later
 processes load it (numba's import and its target initialisation: ~1–2 s per process).
-Pinocchio itself cannot be called from compiled code, so one Python-level Pinocchio call per
-iteration remains; the kernel removes the ~80 small numpy/LAPACK calls around it.
+Pinocchio itself cannot be called from compiled code: for chains of 1-DoF revolute/prismatic joints
+(the fused path's models) :mod:`vjm_pin.kinematics.compiled_chain` computes the end placement, frame
+Jacobian and ``log3`` in numba (equal to Pinocchio's to rounding), and :func:`_iterations_into` (built by
+:func:`looped`) runs the solver's whole plain local iteration, bookkeeping included, in one compiled
+call; :func:`_restore_into` does the same for a least-energy restoration. Pinocchio stays the
+kinematics of the numpy twin and of every other path.
 
 Import policy (:func:`get`): numba is imported lazily, never at package import. ``VJM_PIN_JIT``
 = ``0``: the numpy twin always; ``1``: compiled from the first solve; unset or ``auto``: the numpy
@@ -821,6 +825,189 @@ def _restore_step(pos, erot, jac6, x, task, free, minv, escale, vscale, pt, lim,
             if abs(xout[i]) < 1e-150:
                 xout[i] = 0.0
     return 0
+
+
+#: Codes of :func:`_iterations_into`: the local iteration gave way / converged.
+GAVE_WAY = 0
+DONE = 1
+
+_fk_jit = None  # the compiled vjm_pin.kinematics.compiled_chain.forward, set by looped()
+_roterr_jit = None  # the compiled compiled_chain.rotation_error, set by looped()
+
+
+def _same_bits(a, b):
+    """``a.tobytes() == b.tobytes()`` for float64 vectors."""
+    if a.shape[0] != b.shape[0]:
+        return False
+    av = a.view(np.int64)
+    bv = b.view(np.int64)
+    for i in range(a.shape[0]):
+        if av[i] != bv[i]:
+            return False
+    return True
+
+
+def _iterations_into(x0, kx, have, kf, kpos, krot, geo, jinfo, rt, rot, flush, ci, cf, kz, mask, theta0, vscale,
+                     escale, xout, ws, kbuf, thr, defer, lim):
+    """The whole plain local iteration of :meth:`~vjm_pin.solver.equilibrium.EquilibriumSolver._fused_iterations`
+    (compiled by :func:`looped`): per iteration the end placement and frame Jacobian by the compiled
+    forward kinematics of :mod:`vjm_pin.kinematics.compiled_chain` (``geo``, ``jinfo``: its
+    :class:`~vjm_pin.kinematics.compiled_chain.ChainTable`), the orientation error ``log3(R* Rᵀ)``
+    (``rt`` = R*, when ``rot``) and :func:`_iterate_into`'s iteration, with the solver's bookkeeping:
+    the polish counter (``lim[1]`` polish steps at most), the progress test (the KKT norm halves at
+    every step after the first, unless ``lim[2]`` > 0: at most that many relaxed steps; else at most
+    ``lim[0]`` steps), the verdict of a convergence (rank test, stable: every eigenvalue of eq. (23)
+    below ``−thr`` when ``cf`` asks for stable equilibria). A warm start: where ``x`` is bit for bit
+    ``kx`` and ``have``, the factorisation ``kf`` and placement ``(kpos, krot)`` kept there are used
+    (no kinematics, no factorisation), as the solver does.
+
+    Writes at convergence the equilibrium into ``xout``, the factorisation, eigenvalues, matrix of
+    eq. (23) and ``info`` into ``ws`` (:func:`_iterate_into`'s layout) and the Jacobian, position
+    and rotation there into ``kbuf`` = ``(j6, pos, rot)`` (unless reused). Returns ``(code,
+    iterations, counted, kkt, ep, er, rs, reused)``: ``code`` :data:`DONE` or :data:`GAVE_WAY`;
+    ``counted`` the last iteration the solver records in ``_fast_its`` (−1: none); ``reused``: the
+    converged iterate is ``kx`` (the kept placement and Jacobian are its state)."""
+    max_iter, polish_max, relaxed = lim[0], lim[1], lim[2]
+    j6, pos, rotm = kbuf[0], kbuf[1], kbuf[2]
+    x = x0.copy()
+    erot = np.zeros(3)
+    kkt_prev = math.inf
+    polish = 0
+    counted = -1
+    follow = cf[6] != 0.0
+    n = ci[0]
+    for it in range(max_iter + 1 + polish_max):
+        reuse = have and _same_bits(x, kx)
+        if reuse:
+            if rot:
+                _roterr_jit(rt, krot, erot)
+            status, kkt, ep, er, rs, kf2, _dx, xn, ev = _iterate_jit(
+                j6, kpos, erot, x, False, polish < polish_max, flush, False, kf, ci, cf, kz, mask, theta0, vscale,
+                escale, True)
+        else:
+            _fk_jit(x, geo, jinfo, j6, pos, rotm)
+            if rot:
+                _roterr_jit(rt, rotm, erot)
+            status, kkt, ep, er, rs, kf2, _dx, xn, ev = _iterate_jit(
+                j6, pos, erot, x, True, polish < polish_max, flush, False, kf, ci, cf, kz, mask, theta0, vscale,
+                escale, True)
+        if status == FACTOR_FAIL or status == RANK_FAIL:
+            return GAVE_WAY, it, counted, kkt, ep, er, rs, reuse
+        if status == POLISH:
+            polish += 1
+            x = xn
+            kkt_prev = math.inf
+            continue
+        if status == CONVERGED:
+            rr = kf2[2]
+            m = rr.shape[0]
+            cond = _cond_bound(rr, m)
+            if not cf[8] * cond < 0.5 and not _full_rank(rr, m, cf[8]):
+                return GAVE_WAY, it, counted, kkt, ep, er, rs, reuse
+            nz = n - m
+            sym = ev.reshape((nz, nz))
+            ws[0][:, :] = kf2[0]
+            ws[1][:, :] = kf2[1]
+            ws[2][:, :] = kf2[2]
+            ws[3][:] = kf2[3]
+            ws[4][:] = kf2[4]
+            ws[5][:] = kf2[5]
+            ws[6][:, :] = kf2[6]
+            ws[7][:] = kf2[7]
+            ws[9][:, :] = sym
+            info = ws[10]
+            info[1] = cond
+            if defer and _certified_stable(sym, nz, thr):
+                info[0] = 1.0
+                stable = True
+            else:
+                info[0] = 0.0
+                evs = np.linalg.eigvalsh(sym)
+                ws[8][:] = evs
+                stable = nz == 0 or evs[nz - 1] < -thr
+            if follow and not stable:
+                return GAVE_WAY, it, it, kkt, ep, er, rs, reuse
+            for i in range(x.shape[0]):
+                xout[i] = x[i]
+            return DONE, it, counted, kkt, ep, er, rs, reuse
+        counted = it
+        if (it and relaxed == 0 and not kkt < 0.5 * kkt_prev) or it - polish >= (relaxed if relaxed else max_iter):
+            return GAVE_WAY, it, counted, kkt, ep, er, rs, reuse
+        if status != CONTINUE:
+            return GAVE_WAY, it, counted, kkt, ep, er, rs, reuse
+        x = xn
+        kkt_prev = kkt
+    return GAVE_WAY, max_iter + polish_max, counted, 0.0, 0.0, 0.0, 0.0, False
+
+
+def _restore_into(x0, geo, jinfo, rt, rot, task, free, minv, escale, vscale, pt, lim, max_step, flush, max_iter,
+                  xout, kbuf):
+    """The whole least-energy restoration of :meth:`~vjm_pin.solver.equilibrium.EquilibriumSolver._restore`
+    (compiled by :func:`looped`): up to ``max_iter + 1`` steps of :func:`_restore_step`, each at the
+    end placement and frame Jacobian of the compiled forward kinematics (``geo``, ``jinfo``) and the
+    orientation error ``log3(R* Rᵀ)`` (``rt`` = R*, when ``rot``). Writes the last iterate into
+    ``xout`` and its Jacobian, position and rotation into ``kbuf`` = ``(j6, pos, rot)``. Returns
+    ``(status, evaluations)``: 1 restored (``max|e / escale| ≤ lim``), −1 singular or not finite,
+    0 the steps ran out (the caller tests the final error); ``evaluations`` the kinematics
+    evaluations done (the numpy loop's count)."""
+    j6, pos, rotm = kbuf[0], kbuf[1], kbuf[2]
+    x = x0.copy()
+    xn = np.empty(x.shape[0])
+    erot = np.zeros(3)
+    evals = 0
+    for _ in range(max_iter + 1):
+        _fk_jit(x, geo, jinfo, j6, pos, rotm)
+        evals += 1
+        if rot:
+            _roterr_jit(rt, rotm, erot)
+        status = _restore_jit(pos, erot, j6, x, task, free, minv, escale, vscale, pt, lim, max_step, flush, xn)
+        if status != 0:
+            for i in range(x.shape[0]):
+                xout[i] = x[i]
+            return status, evals
+        for i in range(x.shape[0]):
+            x[i] = xn[i]
+    _fk_jit(x, geo, jinfo, j6, pos, rotm)
+    evals += 1
+    for i in range(x.shape[0]):
+        xout[i] = x[i]
+    return 0, evals
+
+
+_looped = None  # the compiled _iterations_into once built, False when numba is unavailable
+_restore_jit = None  # the compiled _restore_step, set by looped()
+_restore_looped = None  # the compiled _restore_into, set by looped()
+
+
+def looped():
+    """The compiled :func:`_iterations_into` (kinematics included), or None when numba cannot be
+    imported."""
+    global _looped
+    if _looped is None:
+        if lean() is None:
+            _looped = False
+        else:
+            import numba
+
+            from vjm_pin.kinematics import compiled_chain
+
+            fk = compiled_chain.compiled()
+            if fk is None:
+                _looped = False
+            else:
+                g = globals()
+                opts = {"cache": True, "nogil": True}
+                g["_fk_jit"], g["_roterr_jit"] = fk[0], fk[2]
+                g["_same_bits"] = numba.njit(**opts)(_same_bits)
+                g["_restore_jit"] = restorer()
+                g["_restore_looped"] = numba.njit(**opts)(_restore_into)
+                _looped = numba.njit(**opts)(_iterations_into)
+    return _looped or None
+
+
+def restore_looped():
+    """The compiled :func:`_restore_into` (kinematics included), or None when numba cannot be imported."""
+    return _restore_looped if looped() is not None else None
 
 
 _restorer = None  # the compiled _restore_step once built, False when numba is unavailable
