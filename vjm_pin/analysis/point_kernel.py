@@ -292,8 +292,7 @@ def _top_eigpair(a):
     """The largest eigenvalue of the symmetric (n, n) ``a`` (lower triangle read; ``a`` is
     overwritten) and a unit eigenvector, for :func:`_point_loops` (compiled with it): Householder
     tridiagonalisation ``a = Q T Qᵀ`` (``4n³/3``), bisection (by quarters) on the Sturm count
-    of ``T`` from the Gershgorin bracket until it isolates the top eigenvalue, then Newton's
-    iteration on ``det(T − λI)`` inside that bracket, to LAPACK's tolerance ``max(2ε|λ|, ε‖T‖)``, inverse
+    of ``T`` from the Gershgorin bracket to LAPACK's tolerance ``max(2ε|λ|, ε‖T‖)``, inverse
     iteration on ``T`` (partial pivoting, three solves from a fixed start) and ``Q`` applied to
     the vector — instead of every eigenpair
     (``np.linalg.eigh``): the value to a few units of ``ε‖a‖`` as LAPACK's, the vector to
@@ -362,13 +361,8 @@ def _top_eigpair(a):
         lo -= 2.0 * eps * tnorm
         hi += 2.0 * eps * tnorm
         atol = max(eps * tnorm, pivmin)  # LAPACK's (dstebz) default absolute tolerance
-        clo = 0  # eigenvalues below lo (the Gershgorin bound: none)
-        newton = False
         for _ in range(200):
             if hi - lo <= max(2.0 * eps * max(abs(lo), abs(hi)), atol):
-                break
-            if clo == n - 1:  # [lo, hi) holds the top eigenvalue alone: Newton's iteration from here
-                newton = True
                 break
             # quadrisection: three independent Sturm counts (their division chains overlap)
             w4 = 0.25 * (hi - lo)
@@ -404,49 +398,12 @@ def _top_eigpair(a):
             if c1 == n:  # every eigenvalue below s1
                 hi = s1
             elif c2 == n:
-                lo, hi, clo = s1, s2, c1
+                lo, hi = s1, s2
             elif c3 == n:
-                lo, hi, clo = s2, s3, c2
+                lo, hi = s2, s3
             else:
-                lo, clo = s3, c3
+                lo = s3
         lam = 0.5 * (lo + hi)
-        if newton:
-            # the top eigenvalue isolated in [lo, hi): Newton's iteration on det(T − λI) (its logarithmic
-            # derivative Σ q_i'/q_i from the pivots' recurrence), kept inside the bracket (bisection
-            # where a step leaves it; the bracket shrinks with every Sturm count), to the tolerance above
-            x = lam
-            for _ in range(60):
-                tol = max(2.0 * eps * max(abs(lo), abs(hi)), atol)
-                if hi - lo <= tol:
-                    x = 0.5 * (lo + hi)
-                    break
-                q = d[0] - x
-                dq = -1.0
-                if abs(q) < pivmin:
-                    q = -pivmin
-                cnt = 1 if q < 0 else 0
-                der = dq / q
-                for i in range(1, n):
-                    r = e[i - 1] * e[i - 1] / q
-                    dq = -1.0 + r * dq / q
-                    q = d[i] - x - r
-                    if abs(q) < pivmin:
-                        q = -pivmin
-                    if q < 0:
-                        cnt += 1
-                    der += dq / q
-                if cnt == n:  # every eigenvalue below x
-                    hi = x
-                else:
-                    lo = x
-                xn = x - 1.0 / der
-                if not (lo < xn < hi):
-                    xn = 0.5 * (lo + hi)
-                if abs(xn - x) <= 0.5 * tol:
-                    x = xn
-                    break
-                x = xn
-            lam = x
     # inverse iteration on T − λI (tridiagonal LU with partial pivoting, pivots floored)
     floor = max(eps * tnorm, 1e-300)
     y = np.empty(n)
