@@ -112,11 +112,19 @@ def analyse(source, max_deflection: float, steps: int, loadings=LOADINGS) -> dic
 #: one ``pin.Data`` (:func:`~vjm_pin.kinematics.shared.share_data`; a new one costs ~1 s at 258
 #: coordinates). Every user recomputes what it reads from its own model: the same numbers.
 _TREES: list = []
+#: The models loaded in this process, by file: the four tasks of a model (:func:`_task`) load it
+#: once per worker (a ``VjmModel`` is frozen and no solver changes it; each task builds its own
+#: solver).
+_MODELS: dict = {}
 
 
 def _load(source):
-    """:func:`load_vjm`, the model sharing the ``pin.Data`` of an earlier one of its joint tree."""
-    vm = load_vjm(source)
+    """:func:`load_vjm`, the model sharing the ``pin.Data`` of an earlier one of its joint tree
+    (each file loaded once per process)."""
+    key = str(source)
+    if key in _MODELS:
+        return _MODELS[key]
+    vm = _MODELS[key] = load_vjm(source)
     for like in _TREES:
         try:
             share_data(vm.model, like)

@@ -46,6 +46,7 @@ multipliers of a redundant set.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from itertools import pairwise
@@ -89,7 +90,7 @@ def jlog3(theta: np.ndarray) -> np.ndarray:
     zero. (``pin.Jlog3`` of pin 4.1 is off by up to ~4e-10 near |θ| = 5e-4 rad, which
     spoils finite-difference checks; this one is accurate to round-off.)"""
     theta = np.asarray(theta, float)
-    beta, _ = _beta(float(np.linalg.norm(theta)))
+    beta, _ = _beta(math.sqrt(float(theta.dot(theta))))  # np.linalg.norm's arithmetic, without its overhead
     s = skew(theta)
     return np.eye(3) + 0.5 * s + beta * (s @ s)
 
@@ -100,7 +101,7 @@ def jlog3_derivative(theta: np.ndarray, lam: np.ndarray) -> np.ndarray:
     With ``Jlog3 = I + ½[θ]× + β(|θ|)[θ]×²`` and ``[θ]×²λ = θ(θ·λ) − |θ|²λ``."""
     theta = np.asarray(theta, float)
     lam = np.asarray(lam, float)
-    t = float(np.linalg.norm(theta))
+    t = math.sqrt(float(theta.dot(theta)))  # np.linalg.norm's arithmetic
     beta, dbeta_t = _beta(t)
     tl = float(theta @ lam)
     sq = theta * tl - t * t * lam
@@ -125,6 +126,9 @@ class ClosureFrames:
             screw form (:func:`~vjm_pin.kinematics.screw.psi_hessian_screw`; chains of 1-DoF
             revolute/prismatic joints) instead of Pinocchio's kinematic Hessians (then ``a`` and
             ``b`` carry none).
+        support: ``(cols, mask, runs)`` of :meth:`hessian_block` when known in advance (the
+            joints that support frame a or frame b: :meth:`ClosureSet.support`), else None
+            (found from the Jacobians' nonzero columns: the same columns).
     """
 
     closure: Closure
@@ -134,6 +138,7 @@ class ClosureFrames:
     jacobian: np.ndarray
     jlog: np.ndarray
     screw: bool = False
+    support: tuple | None = None
 
     def wrenches(self, lam6: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The reaction wrench pair (W_a, W_b), each (6,) (N, N·m, world axes, at the frame
@@ -188,10 +193,13 @@ class ClosureFrames:
             raise InputError("hessian_block needs a closure state evaluated in screw form")
         a, b = self.a, self.b
         lam6 = np.asarray(lam6, float)
-        cols = np.flatnonzero(np.any(a.jacobian != 0, axis=0) | np.any(b.jacobian != 0, axis=0))
+        if self.support is not None:
+            cols, mask, _ = self.support
+        else:
+            cols = np.flatnonzero(np.any(a.jacobian != 0, axis=0) | np.any(b.jacobian != 0, axis=0))
+            mask = support_mask(a.jacobian.shape[1], cols)
         ja, jb = a.jacobian[:, cols], b.jacobian[:, cols]
         w_a, w_b = self.wrenches(lam6)
-        mask = support_mask(a.jacobian.shape[1], cols)
         block = (
             psi_hessian_screw(ja, w_a, mask)
             + psi_hessian_screw(jb, w_b, mask)
@@ -201,16 +209,17 @@ class ClosureFrames:
 
 
 def closure_frames(
-    closure: Closure, a: KinematicState, b: KinematicState, screw: bool = False
+    closure: Closure, a: KinematicState, b: KinematicState, screw: bool = False, support=None
 ) -> ClosureFrames:
     """Evaluate one closure from the states of its two frames (module docstring formulas);
-    ``screw``: its Hessian from the Jacobians in screw form (:class:`ClosureFrames`)."""
+    ``screw``: its Hessian from the Jacobians in screw form, ``support`` its columns
+    (:class:`ClosureFrames`)."""
     r = a.position - b.position
     s = relative_placement(a.position, a.rotation, b.position, b.rotation)
     jlog = jlog3(s[3:])
     jp = b.rotation.T @ (a.jacobian[:3] - b.jacobian[:3] + skew(r) @ b.jacobian[3:])
     jr = jlog @ a.rotation.T @ (a.jacobian[3:] - b.jacobian[3:])
-    return ClosureFrames(closure, a, b, s, np.vstack([jp, jr]), jlog, screw)
+    return ClosureFrames(closure, a, b, s, np.vstack([jp, jr]), jlog, screw, support if screw else None)
 
 
 @dataclass(frozen=True)
@@ -258,7 +267,7 @@ class ClosureState:
             if np.any(lam6):
                 if cf.screw:  # on the joints that move the closure's frames only
                     cols, block = cf.hessian_block(lam6)
-                    _add_block(out, cols, block)
+                    _add_block(out, cols, block, cf.support[2] if cf.support is not None else None)
                 else:
                     out += cf.hessian(lam6)
         return out
@@ -272,16 +281,26 @@ class ClosureState:
         }
 
 
-def _add_block(out: np.ndarray, cols: np.ndarray, block: np.ndarray) -> None:
-    """``out[np.ix_(cols, cols)] += block`` (``cols`` ascending, distinct) by slices over the
-    contiguous runs of ``cols`` (a closure's columns: one or two legs, a few runs): the same
-    additions, without the fancy-indexed copy and write-back."""
+def _runs(cols: np.ndarray) -> list | None:
+    """The contiguous runs of ``cols`` (ascending, distinct) as ``(first, end, i0, i1)``
+    (``cols[i0:i1] == range(first, end)``), or None beyond four runs (:func:`_add_block`)."""
     breaks = np.flatnonzero(np.diff(cols) != 1) + 1
     if len(breaks) > 3:
+        return None
+    edges = [0, *breaks.tolist(), len(cols)]
+    return [(int(cols[i]), int(cols[j - 1]) + 1, i, j) for i, j in pairwise(edges)]
+
+
+def _add_block(out: np.ndarray, cols: np.ndarray, block: np.ndarray, runs=None) -> None:
+    """``out[np.ix_(cols, cols)] += block`` (``cols`` ascending, distinct) by slices over the
+    contiguous runs of ``cols`` (a closure's columns: one or two legs, a few runs): the same
+    additions, without the fancy-indexed copy and write-back. ``runs``: :func:`_runs` of ``cols``
+    when known."""
+    if runs is None:
+        runs = _runs(cols)
+    if runs is None:
         out[np.ix_(cols, cols)] += block
         return
-    edges = [0, *breaks.tolist(), len(cols)]
-    runs = [(int(cols[i]), int(cols[j - 1]) + 1, i, j) for i, j in pairwise(edges)]
     for r0, r1, i0, i1 in runs:
         for c0, c1, j0, j1 in runs:
             out[r0:r1, c0:c1] += block[i0:i1, j0:j1]
@@ -343,6 +362,23 @@ class ClosureSet:
             screw = screw_applicable(model)
         self.screw = bool(screw)
         self._indices = tuple(list(c.indices) for c in self.closures)
+        self._support = tuple(self.support(i) for i in range(len(pairs))) if self.screw else None
+
+    def support(self, i: int) -> tuple[np.ndarray, np.ndarray, list | None]:
+        """``(cols, mask, runs)`` of closure ``i`` in screw form: ``cols`` the velocity indices of
+        the joints that support frame a or frame b (ascending; every other column of both frame
+        Jacobians is zero, and these are not at any configuration: a 1-DoF revolute or prismatic
+        joint's column holds its unit axis), ``mask`` their
+        :func:`~vjm_pin.kinematics.screw.support_mask`, ``runs`` their contiguous runs."""
+        model = self.model
+        cols = set()
+        for fid in self.pairs[i]:
+            for j in model.supports[model.frames[fid].parentJoint]:
+                if j > 0:
+                    jm = model.joints[j]
+                    cols.update(range(jm.idx_v, jm.idx_v + jm.nv))
+        c = np.array(sorted(cols), int)
+        return c, support_mask(model.nv, c), _runs(c)
 
     @property
     def n_rows(self) -> int:
@@ -354,8 +390,9 @@ class ClosureSet:
         screw = hessian and self.screw
         states = self.frames.evaluate(x, hessian=hessian and not screw)
         frames, res, jac = [], [], []
-        for c, (fa, fb), idx in zip(self.closures, self.pairs, self._indices):
-            cf = closure_frames(c, states[fa], states[fb], screw)
+        support = self._support or (None,) * len(self.closures)
+        for c, (fa, fb), idx, sup in zip(self.closures, self.pairs, self._indices, support):
+            cf = closure_frames(c, states[fa], states[fb], screw, sup)
             frames.append(cf)
             res.append(cf.placement[idx])
             jac.append(cf.jacobian[idx])

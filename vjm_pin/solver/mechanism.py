@@ -62,6 +62,8 @@ Public API::
 
 from __future__ import annotations
 
+import threading
+from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
@@ -105,6 +107,16 @@ FAR_JUMP = 1.0
 #: Rotation-target iterations of a task holding some but not all rotations, and their tolerance (rad).
 ROTATION_TARGET_ITER = 30
 ROTATION_TARGET_TOL = 1e-12
+#: Evaluated Newton states (:meth:`MechanismSolver._state`) a solver keeps, per thread, keyed on the
+#: exact bytes of their inputs: a Newton attempt that starts where the previous one started (the
+#: curve tracer's short-step fall-back after the plain local attempt, a result formed at the
+#: converged point) reuses them instead of evaluating again (the same numbers: the evaluation is
+#: deterministic).
+STATE_CACHE_SIZE = 16
+#: Bound on the rounding error of a computed singular value of a row-normalised constraint
+#: Jacobian (rows of unit norm, so ‖S‖₂ ≤ √rows; LAPACK's error is ~n·ε·‖S‖₂ ≈ 1e-13 here) used by
+#: :meth:`MechanismSolver._full_row_rank`.
+SV_ERROR = 1e-10
 #: Note attached to a result whose multipliers are not unique.
 MULTIPLIERS_NOTE = (
     "{n} redundant constraint row(s) ({labels}): the reactions are statically indeterminate; "
@@ -338,6 +350,14 @@ class MechanismSolver:
         self.free = np.concatenate([vm.theta_idx, vm.q_idx]).astype(int)
         self.nt = vm.n_theta
         self._mask_free = support_mask(model.nv, self.free) if self._screw else None
+        # screw form: the free coordinates (free order) whose joints support the task frame (the
+        # nonzero columns of its Jacobian at every configuration: a 1-DoF joint's column holds its
+        # unit axis) and their support mask (_hessian)
+        self._end_support = None
+        if self._screw:
+            sup = {model.joints[j].idx_v for j in model.supports[model.frames[vm.frame_id].parentJoint] if j > 0}
+            nz = np.flatnonzero(np.isin(self.free, sorted(sup)))
+            self._end_support = (nz, support_mask(model.nv, self.free[nz]))
         n = len(self.free)
         ref = self.frames.evaluate(vm.reference, hessian=False)
         end0 = ref[vm.frame_id]
@@ -358,11 +378,16 @@ class MechanismSolver:
         self._cscale = np.array(
             [self.length_scale if c in ("x", "y", "z") else 1.0 for cl in self.closures.closures for c in cl.components]
         )
+        self._closure_position = np.array(
+            [c in ("x", "y", "z") for cl in self.closures.closures for c in cl.components], bool
+        )
         # task axes: rows (world components) of the task coordinates that held/loaded rows index
         self._axes = np.eye(6)[self.task]
         self._axis_labels = tuple(f"task.{COMPONENTS[c]}" for c in self.task)
         self._axis_translation = np.array([c < 3 for c in self.task], bool)
         self._custom_axes = False
+        self._states = threading.local()  # per thread: an OrderedDict of STATE_CACHE_SIZE states
+        self._split_memo: dict = {}  # _split_axes
 
     def with_task_axes(self, axes) -> MechanismSolver:
         """A solver sharing this one's kinematics whose task coordinates are the rows of ``axes``
@@ -392,11 +417,14 @@ class MechanismSolver:
         new._axis_labels = tuple(f"task.axis{i}" for i in range(m))
         new._axis_translation = np.array([bool(np.any(r[:3])) for r in t], bool)
         new._custom_axes = True
+        new._states = threading.local()  # other task rows: other states
+        new._split_memo = {}
         return new
 
     def sibling(self, **options) -> MechanismSolver:
         """A copy sharing the kinematics (one ``pin.Data``) with some of ``follow_stable``,
-        ``restarts``, ``tol``, ``max_iter`` changed."""
+        ``restarts``, ``tol``, ``max_iter`` changed (and the evaluated states: these options do
+        not enter them)."""
         import copy
 
         new = copy.copy(self)
@@ -441,6 +469,7 @@ class MechanismSolver:
         new._cscale = np.array(
             [new.length_scale if c in ("x", "y", "z") else 1.0 for cl in self.closures.closures for c in cl.components]
         )
+        new._states = threading.local()  # another model: other states
         return new
 
     def linearize(self, x, hrows, wrench=None, state=None) -> Linearization:
@@ -498,11 +527,19 @@ class MechanismSolver:
         return r, bh, c, bool(conv)
 
     def _split_axes(self, hrows) -> tuple[np.ndarray, np.ndarray]:
-        """(held rows, loaded rows) of the task axes, world components."""
-        h = np.asarray(hrows, int)
-        mask = np.ones(len(self._axes), bool)
-        mask[h] = False
-        return self._axes[h], self._axes[mask]
+        """(held rows, loaded rows) of the task axes, world components (read-only arrays, kept per
+        set of held rows)."""
+        key = tuple(int(i) for i in hrows)
+        hit = self._split_memo.get(key)
+        if hit is None:
+            h = np.asarray(key, int)
+            mask = np.ones(len(self._axes), bool)
+            mask[h] = False
+            hit = (self._axes[h], self._axes[mask])
+            for arr in hit:
+                arr.flags.writeable = False
+            self._split_memo[key] = hit
+        return hit
 
     # ----------------------------------------------------------------- inputs
     def components(self, spec) -> tuple[int, ...]:
@@ -557,6 +594,32 @@ class MechanismSolver:
         return pot
 
     def _state(self, x, hrows, w_dead, p_t, r_t, factor, hessian) -> _State:
+        """The :class:`_State` at ``x`` (:meth:`_evaluate_state`), one of the last
+        :data:`STATE_CACHE_SIZE` evaluated on this thread when its inputs are the same bytes."""
+        key = (
+            np.ascontiguousarray(x, dtype=float).tobytes(),
+            tuple(int(i) for i in hrows),
+            np.ascontiguousarray(w_dead, dtype=float).tobytes(),
+            np.ascontiguousarray(p_t, dtype=float).tobytes(),
+            np.ascontiguousarray(r_t, dtype=float).tobytes(),
+            float(factor),
+            bool(hessian),
+            self.rank_rtol,
+        )
+        cache = getattr(self._states, "cache", None)
+        if cache is None:
+            cache = self._states.cache = OrderedDict()
+        hit = cache.get(key)
+        if hit is not None:
+            cache.move_to_end(key)
+            return hit
+        st = self._evaluate_state(x, hrows, w_dead, p_t, r_t, factor, hessian)
+        cache[key] = st
+        if len(cache) > STATE_CACHE_SIZE:
+            cache.popitem(last=False)
+        return st
+
+    def _evaluate_state(self, x, hrows, w_dead, p_t, r_t, factor, hessian) -> _State:
         vm, free = self.vm, self.free
         th, tl = self._split_axes(hrows)
         screw = hessian and self._screw
@@ -576,7 +639,7 @@ class MechanismSolver:
         b = np.concatenate([-cst.residual, e])
         bscale = np.concatenate([self._cscale, np.where(self._axis_translation[np.asarray(hrows, int)], self.length_scale, 1.0)])
         k = a.shape[0]
-        if k and row_rank(a, self.rank_rtol)[4] == k:  # full row rank: every row independent
+        if k and self._full_row_rank(a):  # full row rank: every row independent
             indep, redundant = np.arange(k), ()
         elif k:
             info = constraint_rank(a, rtol=self.rank_rtol)
@@ -611,6 +674,27 @@ class MechanismSolver:
             dload = factor * lst.derivative[np.ix_(free, free)]
         return _State(end, cst, grad, tau, qload, a, b, bscale, indep, redundant, y, z, rr, nu, nu_i, r, w6, dload)
 
+    def _full_row_rank(self, a: np.ndarray) -> bool:
+        """``row_rank(a)[4] == len(a)`` (:func:`~vjm_pin.kinematics.closures.row_rank`: every
+        singular value of the row-normalised ``S`` above ``rank_rtol`` × the largest), without its
+        SVD when the last matrix of this shape found full rank on this thread, ``S₀``, is close:
+        singular values move by at most ``‖S − S₀‖_F`` (Weyl), so ``σ_min(S₀) − δ > rtol·(σ_max(S₀) +
+        δ)`` with ``δ = ‖S − S₀‖_F +`` :data:`SV_ERROR` decides it (the Newton iterates of one
+        solve barely move the constraint rows; the same answer as the SVD)."""
+        memo = getattr(self._states, "rank", None)
+        if memo is not None and memo[0].shape == a.shape and np.all(np.isfinite(a)):
+            norms = np.linalg.norm(a, axis=1)
+            big = float(norms.max())
+            if big > 0 and np.all(norms > self.rank_rtol * big):
+                delta = float(np.linalg.norm(a / norms[:, None] - memo[0])) + SV_ERROR
+                if memo[1] - delta > self.rank_rtol * (memo[2] + delta):
+                    return True
+        _, scaled, sv, _, rank = row_rank(a, self.rank_rtol)
+        if rank == a.shape[0]:
+            self._states.rank = (scaled, float(sv[-1]), float(sv[0]))
+            return True
+        return False
+
     def _hessian(self, s: _State) -> np.ndarray:
         """``W = K − ∂Q/∂z − H(w) − Σ μ_k ∂²c_k/∂z²`` (free block); formed once per state (the
         Newton iteration's, then the linearisation and the verdicts at its converged point)."""
@@ -620,14 +704,15 @@ class MechanismSolver:
         nc = s.cstate.residual.size
         if s.end.hessian is None:  # screw form (self._screw), on the joints that move the task frame
             jf = s.end.jacobian[:, free]
-            nz = np.flatnonzero(np.any(jf != 0, axis=0))
+            nz, mask = self._end_support
             hend = np.zeros((len(free), len(free)))
-            hend[np.ix_(nz, nz)] = psi_hessian_screw(jf[:, nz], s.w6, support_mask(self.vm.model.nv, free[nz]))
+            hend[np.ix_(nz, nz)] = psi_hessian_screw(jf[:, nz], s.w6, mask)
         else:
             hend = contract_hessian(s.end.hessian, s.w6)[np.ix_(free, free)]
         w = self.kz - s.dload - hend
         if nc:
             w = w - s.cstate.hessian(s.nu[:nc])[np.ix_(free, free)]
+        w.flags.writeable = False  # shared: the state (kept, _state) and every Linearization of it
         s.hess = w
         return w
 
@@ -806,7 +891,7 @@ class MechanismSolver:
         return out
 
     def _is_position_row(self, hrows) -> np.ndarray:
-        cp = np.array([c in ("x", "y", "z") for cl in self.closures.closures for c in cl.components], bool)
+        cp = self._closure_position
         return np.concatenate([cp, self._axis_translation[np.asarray(hrows, int)]])
 
     def _perturb(self, x, rng) -> np.ndarray:
