@@ -601,14 +601,14 @@ def test_chain_path_gives_the_dense_path_result(jit_on, posture, d):
 
     vm = _long_column(4, posture)
     calls = []
-    orig = chain_eigen.HeldEigen.smallest
+    orig = chain_eigen.held_eigen
 
-    def spy(self, *a, **k):
-        got = orig(self, *a, **k)
+    def spy(*a, **k):  # the chain eigenproblems (reference, estimate, refined start, mode)
+        got = orig(*a, **k)
         calls.append(got is not None)
         return got
 
-    jit_on.setattr(chain_eigen.HeldEigen, "smallest", spy)
+    jit_on.setattr(crit, "held_eigen", spy)
     lin = []
     orig_lin = crit._linearised_chain
     jit_on.setattr(crit, "_linearised_chain", lambda *a: lin.append(orig_lin(*a)) or lin[-1])
@@ -701,3 +701,97 @@ def test_refined_start_one_confirming_evaluation(jit_on):
     tight = critical_load(vm, X, rtol=1e-10)
     assert calls == [None]
     assert tight.force == pytest.approx(tight_dense.force, rel=1e-10)
+
+
+def test_held_eigen_setup_matches_numpy(jit_on):
+    """held_eigen's compiled setup (chain_eigen._setup_loops) against the numpy expressions: the
+    Jacobian columns in chain order (the same numbers), the held rows ``P·J`` (to rounding), and
+    the rank test against numpy's singular values: declined for held rows of deficient rank or a
+    ratio below RANK_RATIO, and for a non-finite Jacobian (the dense routine then decides)."""
+    from vjm_pin.solver import chain_eigen
+
+    vm = _long_column(4)
+    _, sol, tr = _chain_setup(vm)
+    x = vm.reference.copy()
+    x[sol.free] += 1e-3 * np.sin(np.arange(len(sol.free)))
+    jac = tr.kin.evaluate(x, hessian=False).jacobian
+    task = tr.kernel.task
+    for rows in (None, tr.P):
+        he = chain_eigen.held_eigen(tr.kernel, tr.mask, jac, rows)
+        jz = jac[:, he._lay.cols]
+        cb = jz[task] if rows is None else rows @ jz[task]
+        assert np.array_equal(he._jz, jz)
+        np.testing.assert_allclose(he._cb, cb, rtol=0, atol=1e-14 * np.abs(cb).max())
+        assert he.m == cb.shape[0] and he.n == jz.shape[1]
+    p = tr.P
+    for eps, ok in ((1e-5, True), (1e-9, False), (0.0, False)):
+        rows = np.vstack([p[0], p[0] + eps * p[1]])
+        sv = np.linalg.svd(rows @ jac[:, tr.free][task], compute_uv=False)
+        assert (sv[-1] > chain_eigen.RANK_RATIO * sv[0]) == ok  # numpy's verdict, ...
+        assert (chain_eigen.held_eigen(tr.kernel, tr.mask, jac, rows) is not None) == ok  # ... the setup's
+    bad = jac.copy()
+    bad[1, sol.free[7]] = np.nan
+    assert chain_eigen.held_eigen(tr.kernel, tr.mask, bad) is None
+
+
+def test_pencil_rayleigh_ritz_from_a_generic_start(jit_on):
+    """HeldEigen.pencil (the power iteration accelerated by Rayleigh–Ritz on its Krylov space) from a
+    generic start, not μ's eigenvector: the same certified root as the dense generalized
+    eigenproblem; after a single solve the quotient lies between the root and the start's own
+    quotient (the Ritz vector of a space that holds the start); one more step is no worse."""
+    from vjm_pin.solver.chain_eigen import held_eigen
+
+    vm = _long_column(4)
+    crit, sol, tr = _chain_setup(vm)
+    p0 = crit._start(vm, tr, sol, tr.d)
+    with jit_on.context() as mp:
+        mp.setenv("VJM_PIN_JIT", "0")
+        tr0 = crit._Tracer(vm, tr.d, sol.length_scale, EquilibriumSolver(vm), 1e-4)
+        dense = crit.linearised_load(tr0, crit._start(vm, tr0, tr0.solver, tr0.d))
+    he = held_eigen(tr.kernel, tr.mask, tr.kin.evaluate(p0.eq.x, hessian=False).jacobian, tr.P)
+    w0, w1 = p0.eq.wrench, p0.tan[1] / p0.k
+    start = np.cos(0.37 * np.arange(he.n)) + 0.1
+    t, y, certified = he.pencil(w0, w1, start, cert=1e-10)
+    assert certified and t == pytest.approx(dense, rel=1e-10)
+    assert abs(np.linalg.norm(y) - 1.0) < 1e-12
+    # the start's own quotient yᵀAy / yᵀBy (A = sym W(w₀), B = A − sym W(w₀ + w₁)), in the null space
+    ys = he.pencil(w0, w1, start, max_steps=0)[1]  # the start projected, no solve
+    r0, r1 = he.rayleigh(w0, ys), he.rayleigh(w0 + w1, ys)
+    q0 = r0 / (r0 - r1)
+    t1 = he.pencil(w0, w1, start, max_steps=1)[0]
+    t2 = he.pencil(w0, w1, start, max_steps=2)[0]
+    # (q0 by a difference of two quotients: to ~1e-11 here)
+    assert dense * (1 - 1e-12) <= t2 <= t1 * (1 + 1e-12) and t1 <= q0 * (1 + 1e-9)
+    assert he.pencil(w0, w1, start, max_steps=0)[0] == pytest.approx(q0, rel=1e-9)
+
+
+def test_mode_from_the_correctors_certified_verdict(jit_on):
+    """At a bifurcation the mode is the eigenvector of eq. (23) the corrector certified at the
+    critical point's equilibrium when that is bit for bit the same problem (no eigenproblem of its
+    own): the same mode as the mode's own eigenproblem, and the same point; the verdict is not
+    taken for another wrench, Jacobian or layout."""
+    from vjm_pin.analysis import critical as crit
+    from vjm_pin.solver import chain_kernel
+
+    vm = _long_column(4)
+    used = []
+    orig = crit._corrector_verdict
+    jit_on.setattr(crit, "_corrector_verdict", lambda *a: used.append(orig(*a)) or used[-1])
+    fast = critical_load(vm, X)
+    assert fast.kind == "bifurcation" and used and used[-1] is not None
+    jit_on.setattr(crit, "_corrector_verdict", lambda *a: None)
+    own = critical_load(vm, X)
+    assert own.force == fast.force and own.deflection == fast.deflection
+    assert abs(float(own.mode @ fast.mode)) == pytest.approx(1.0, abs=1e-12)
+    np.testing.assert_allclose(fast.mode, own.mode, atol=1e-9)
+    # the record answers only for its own problem (bit for bit)
+    key, rec = next(reversed(chain_kernel._VERDICT.values()))[0], next(reversed(chain_kernel._VERDICT.values()))
+    _, lay, jz, task, w, lam, vec = rec
+    got = chain_kernel.last_verdict(key, lay, jz, task, w)
+    assert got is not None and got[0] == lam and got[1] is vec
+    assert chain_kernel.last_verdict(key, lay, jz, task, w * (1 + 4e-16)) is None
+    jz2 = jz.copy()
+    jz2[0, 3] = np.nextafter(jz2[0, 3], np.inf)
+    assert chain_kernel.last_verdict(key, lay, jz2, task, w) is None
+    assert chain_kernel.last_verdict(key, lay, jz, task[::-1].copy(), w) is None
+    assert chain_kernel.last_verdict(key.copy(), lay, jz, task, w) is None

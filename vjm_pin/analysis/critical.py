@@ -52,8 +52,10 @@ Where the tracer's points come from the compiled O(n) chain kernel (a long seria
 ``VJM_PIN_JIT`` not 0: :func:`_chain`), the eigenproblems of steps 1–2 and of the mode use the
 same chain algebra (:mod:`vjm_pin.solver.chain_eigen`, Sturm-certified) instead of dense ones:
 the reference's eq. (23) (:func:`_reference_chain`), the estimate (:func:`_linearised_chain`:
-the pencil's power iteration bounded by a Sturm count, else Newton on the smallest eigenvalue)
-and the mode (:func:`_mode_chain`); the dense routines decide wherever the chain algebra declines.
+the pencil's power iteration (Rayleigh–Ritz accelerated) bounded by a Sturm count, else Newton on
+the smallest eigenvalue) and the mode (:func:`_mode_chain`: at a bifurcation the eigenvector of
+eq. (23) that the corrector certified at the critical point's own equilibrium, when it is bit for
+bit that problem); the dense routines decide wherever the chain algebra declines.
 There the first evaluation may also start nearer the root (:func:`_refined_start`: the
 frozen-geometry problem repeated at the estimate's tangent prediction, where the path is nearly
 linear), so that one verified equilibrium can meet the tolerance of step 4.
@@ -489,11 +491,15 @@ def _warm(tr, y) -> None:
 
 def _mode_chain(tr, c, held: bool) -> np.ndarray | None:
     """:func:`_mode` by the chain algebra (the eigenvector of ``λ₁``, certified, started from the
-    point kernel's last eigenvector), or None where it declines."""
+    point kernel's last eigenvector; at a bifurcation the corrector's certified one when it is
+    bit for bit the same problem: :func:`_corrector_verdict`), or None where it declines."""
     he = held_eigen(tr.kernel, tr.mask, _jacobian(tr, c.eq.x), None if held else tr.P)
     if he is None:
         return None
-    got = he.smallest(np.asarray(c.eq.wrench, float), remembered(tr.kernel, he.n))
+    wrench = np.asarray(c.eq.wrench, float)
+    got = _corrector_verdict(tr, he, wrench) if held else None
+    if got is None:
+        got = he.smallest(wrench, remembered(tr.kernel, he.n))
     if got is None:
         return None
     w = he.free_vector(got[1])
@@ -502,6 +508,24 @@ def _mode_chain(tr, c, held: bool) -> np.ndarray | None:
     out = np.zeros_like(c.eq.x)
     out[tr.free] = w if w[i] >= 0 else -w
     return out
+
+
+def _corrector_verdict(tr, he, wrench):
+    """The eigenpair of eq. (23) the corrector certified at its last converged equilibrium
+    (:func:`~vjm_pin.solver.chain_kernel.last_verdict`: its smallest eigenvalue by a Sturm count,
+    the unit eigenvector to ``VEC_TOL_VERDICT`` per inverse iteration) when that is bit for bit
+    the problem of ``he`` (every task row held) under ``wrench``: the critical point's own
+    equilibrium, so the mode needs no eigenproblem of its own; else None."""
+    try:
+        key = tr._corr[1][0]
+    except (AttributeError, TypeError, IndexError, KeyError):
+        return None
+    if not isinstance(key, np.ndarray) or he.m != len(tr.task):
+        return None
+    got = _chain_kernel.last_verdict(key, he._lay, he._jz, tr.kernel.task, wrench)
+    if got is None or got[1].shape != (he.n,) or not np.all(np.isfinite(got[1])):
+        return None
+    return got
 
 
 def _mode_mechanism(tr, c, held: bool) -> np.ndarray:

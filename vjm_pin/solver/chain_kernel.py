@@ -891,15 +891,34 @@ SHARED_MAX = 8
 SHARED_MAX_BYTES = 1 << 26
 
 
+#: :class:`_ContentKey` hashes every this-many-th byte of ``K_θ`` and of the support mask.
+KEY_HASH_STRIDE = 61
+
+
+class _ContentKey(tuple):
+    """A :func:`_content_key`: a tuple ``(shapes, K_θ bytes, free bytes, mask bytes)`` that is
+    equal to another only when all of its bytes are (tuple equality), hashed from a sample of the
+    two large byte strings (every :data:`KEY_HASH_STRIDE`-th byte, and all of the shapes and free
+    coordinates): hashing the whole ~0.2 MB key took ~50 µs per fresh solver at n = 144, and keys
+    that share the hash only cost an equality test."""
+
+    __slots__ = ()
+
+    def __hash__(self):
+        st = KEY_HASH_STRIDE
+        return hash((self[0], self[1][::st], self[2], self[3][::st]))
+
+
 def _content_key(kz, free, nt, mask) -> tuple:
     """Everything a :class:`_Layout` is computed from, as bytes: ``K_θ = kz[:nt, :nt]``, the
     free coordinates and the support mask (their shapes and element types fixed by the
-    conversions), so equal models share a layout and models that differ in any entry do not."""
+    conversions), so equal models share a layout and models that differ in any entry do not
+    (a :class:`_ContentKey`)."""
     kt = np.ascontiguousarray(kz[:nt, :nt], float)
     fr = np.ascontiguousarray(free, np.int64)
     mk = b"" if mask is None else np.ascontiguousarray(mask, np.bool_).tobytes()
     shape = (int(nt), fr.shape[0], kt.shape, None if mask is None else np.shape(mask))
-    return shape, kt.tobytes(), fr.tobytes(), mk
+    return _ContentKey((shape, kt.tobytes(), fr.tobytes(), mk))
 
 
 def _layout(key_obj, kz, free, nt, mask) -> _Layout:
@@ -948,6 +967,52 @@ def _remember(key_obj, vec):
         _GUESS[id(key_obj)] = (key_obj, vec)
 
 
+#: id(kernel constants ``ci``) -> (ci, layout, its problem: Jacobian rows in chain order (6, n),
+#: task rows, wrench; λ₁, unit eigenvector): the certified eq. (23) verdict of the last converged
+#: chain iteration with those constants (:func:`last_verdict`).
+_VERDICT: dict = {}
+
+
+def _record_verdict(ci, lay, out):
+    """Keep the converged iteration's eq. (23) problem (copies) and its certified eigenpair."""
+    fct = out[5]
+    n, nt, m = int(ci[0]), int(ci[1]), int(ci[2])
+    hh = fct[1]
+    if hh.shape[0] != m + 7 or out[9].shape[0] != n:
+        return
+    jz = hh[m + 1:, :][:, lay.order]  # (a copy: fancy indexing)
+    task = ci[6 + n + nt:6 + n + nt + m].copy()
+    rec = (ci, lay, jz, task, np.array(fct[7], float), float(-out[8][0]), out[9])
+    with _LOCK:
+        if len(_VERDICT) >= 64:
+            _VERDICT.pop(next(iter(_VERDICT)), None)
+        _VERDICT[id(ci)] = rec
+
+
+def last_verdict(key_obj, lay, jz, task, wrench):
+    """``(λ₁, y)`` of the last converged chain iteration with the kernel constants ``key_obj``: the
+    smallest eigenvalue of ``Zᵀ sym(K − H) Z`` (eq. 23, every task row held) certified by its Sturm
+    count, and its unit eigenvector (chain order, converged to :data:`VEC_TOL_VERDICT` per step),
+    when that problem is bit for bit the one given (layout ``lay``, Jacobian rows ``jz`` in chain
+    order, task rows ``task``, ``wrench``); else None."""
+    rec = _VERDICT.get(id(key_obj))
+    if rec is None or rec[0] is not key_obj or rec[1] is not lay:
+        return None
+    _, _, rjz, rtask, rw, lam, vec = rec
+    w = np.asarray(wrench, float)
+    t = np.asarray(task)
+    if (
+        rjz.shape != jz.shape
+        or rw.shape != w.shape
+        or rtask.shape != t.shape
+        or rjz.tobytes() != np.ascontiguousarray(jz, float).tobytes()
+        or rw.tobytes() != w.tobytes()
+        or not np.array_equal(rtask, t)
+    ):
+        return None
+    return lam, vec
+
+
 def iterate(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, consts, dense):
     """One fused iteration (the contract of :func:`vjm_pin.solver.kernel.iterate_numpy`) by the
     compiled chain kernel; ``dense`` (the dense kernel, same signature without ``dense``) where
@@ -968,6 +1033,7 @@ def iterate(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, consts, 
         return dense(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, consts)
     if out[0] == _kernel.CONVERGED:
         _remember(ci, out[9])
+        _record_verdict(ci, lay, out)
     return out[:9]
 
 
