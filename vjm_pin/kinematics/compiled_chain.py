@@ -67,31 +67,32 @@ class ChainTable:
 def chain_table(model: pin.Model, frame_id: int) -> ChainTable | None:
     """The :class:`ChainTable` of ``model``'s frame ``frame_id``; None unless ``nq == nv`` and every
     joint of the model is a 1-DoF revolute or prismatic joint (the chains whose Hessian of Ψ the
-    solver takes in screw form)."""
+    solver takes in screw form).
+
+    Read afresh for every new solver (a model edited in place gives its new table), each list
+    through one binding call (``tolist``): ~0.2 ms at 150 joints instead of ~1 ms joint by joint."""
     if model.nq != model.nv:
         return None
-    joints = list(model.joints)
-    kinds = []
-    for jm in joints[1:]:
-        kind = _KINDS.get(jm.shortname())
-        if kind is None or jm.nq != 1 or jm.nv != 1:
-            return None
-        kinds.append(kind)
+    joints = model.joints.tolist()
+    kinds = [_KINDS.get(jm.shortname()) for jm in joints[1:]]
+    if None in kinds:  # (every joint of _KINDS has nq = nv = 1)
+        return None
     frame = model.frames[int(frame_id)]
     path = [int(j) for j in model.supports[frame.parentJoint]][1:]  # (the universe first)
     k = len(path)
     geo = np.zeros((k + 1, GEO_COLS))
     jinfo = np.zeros((k, 2), np.int64)
-    for row, j in enumerate(path):
-        kind, axis = kinds[j - 1]
-        jm = joints[j]
-        if axis is None:
-            axis = np.asarray(jm.extract().axis, float).ravel()
-        pl = model.jointPlacements[j]
-        geo[row, :9] = np.asarray(pl.rotation, float).ravel()
-        geo[row, 9:12] = np.asarray(pl.translation, float)
-        geo[row, 12:15] = axis
-        jinfo[row] = (kind, jm.idx_v)
+    if k:
+        pls = model.jointPlacements.tolist()
+        hom = np.array([pls[j].homogeneous for j in path])
+        geo[:k, :9] = hom[:, :3, :3].reshape(k, 9)
+        geo[:k, 9:12] = hom[:, :3, 3]
+        idx_v = model.idx_vs.tolist()
+        sel = [kinds[j - 1] for j in path]
+        geo[:k, 12:15] = [axis if axis is not None else np.asarray(joints[j].extract().axis, float).ravel()
+                          for j, (_, axis) in zip(path, sel)]
+        jinfo[:, 0] = [kind for kind, _ in sel]
+        jinfo[:, 1] = [idx_v[j] for j in path]
     fp = frame.placement
     geo[k, :9] = np.asarray(fp.rotation, float).ravel()
     geo[k, 9:12] = np.asarray(fp.translation, float)
