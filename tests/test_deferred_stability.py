@@ -49,3 +49,25 @@ def test_chain_solves_report_every_eigenvalue_of_eq23(monkeypatch, target):
     # pickled (a map worker, Dask) as a plain StabilityResult with the spectrum
     back = pickle.loads(pickle.dumps(st))
     assert type(back) is StabilityResult and np.array_equal(back.eigenvalues, ev) and back.stable == st.stable
+
+
+def test_spectrum_later_stable_now_is_the_constructors_verdict():
+    """``SpectrumLater.stable_now`` (the warm-started solve's verdict, fields set at once) is the
+    object ``SpectrumLater(True, ...)`` builds: the same fields, eigenvalues when first read (then the
+    matrix dropped), the same pickle."""
+    from vjm_pin.solver.stability import SpectrumLater
+
+    rng = np.random.default_rng(3)
+    a = rng.standard_normal((5, 5))
+    sym = -(a @ a.T) - np.eye(5)
+    got = SpectrumLater.stable_now(np.int64(5), np.float64(1e-9), sym.copy(), np.linalg.eigvalsh)
+    want = SpectrumLater(True, 5, 1e-9, sym.copy(), np.linalg.eigvalsh)
+    assert got.__dict__.keys() == want.__dict__.keys()
+    assert {k: v for k, v in got.__dict__.items() if k != "_matrix"} == {
+        k: v for k, v in want.__dict__.items() if k != "_matrix"}
+    assert type(got.null_dim) is int and type(got.tolerance) is float and got._spectrum is None
+    np.testing.assert_array_equal(got.eigenvalues, want.eigenvalues)
+    assert got._matrix is None and got.margin == want.margin
+    back = pickle.loads(pickle.dumps(got))
+    assert type(back) is StabilityResult and back.stable and back.null_dim == 5
+    np.testing.assert_array_equal(back.eigenvalues, want.eigenvalues)

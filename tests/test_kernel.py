@@ -394,3 +394,37 @@ def test_lu_elimination_is_a_solve_with_dgesv_failures(compiled):
         for bad in (np.zeros((k, k)), np.hstack([rng.standard_normal((k, k - 1)), np.zeros((k, 1))])):
             for fn in (kernel._lu_eliminate, kernel._lu_eliminate.py_func):
                 assert not fn(bad.copy(), np.ones(k), k)
+
+
+def test_mode_follows_every_change_of_the_environment(monkeypatch):
+    """``mode()`` keeps the parse of the last ``VJM_PIN_JIT`` value it read and reads the variable at
+    every call: each change (set, changed, unset, set back) gives the mode of the new value."""
+    for raw, want in (("1", "1"), (" Off ", "0"), ("off", "0"), ("YES", "1"), (None, "auto"), ("0", "0"),
+                      ("maybe", "auto"), ("1", "1"), ("1", "1"), (None, "auto"), ("false", "0")):
+        if raw is None:
+            monkeypatch.delenv("VJM_PIN_JIT", raising=False)
+        else:
+            monkeypatch.setenv("VJM_PIN_JIT", raw)
+        assert kernel.mode() == want, raw
+
+
+@pytest.mark.parametrize("certified", [False, True])
+def test_workspace_after_a_convergence_is_fresh_but_for_the_read_buffers(certified):
+    """``workspace_after`` lays its buffers out as ``workspace`` does (shapes, dtypes, C-contiguous,
+    writable) and shares with the converged workspace only ``info`` and, for a certified verdict
+    (eigenvalues not written), the eigenvalue buffer: across more calls than a block holds, no buffer
+    a result or a cache keeps overlaps any other handed out."""
+    ci = np.array([9, 0, 4], dtype=np.int64)  # (n, _, m: what workspace reads)
+    _, ws = kernel.workspace(ci, 11)
+    _, want = kernel.workspace(ci, 11)
+    pool = []
+    kept = []
+    for _ in range(kernel.WORKSPACE_BLOCK + 3):
+        new = kernel.workspace_after(ws, certified, pool)
+        assert [(a.shape, a.dtype, a.flags.c_contiguous, a.flags.writeable) for a in new] == [
+            (a.shape, a.dtype, True, True) for a in want]
+        shared = [i for i, (a, b) in enumerate(zip(new, ws)) if np.shares_memory(a, b)]
+        assert shared == ([8, 10] if certified else [10])
+        kept.extend(a for i, a in enumerate(new) if i not in shared)
+        ws = new
+    assert not any(np.shares_memory(a, b) for i, a in enumerate(kept) for b in kept[:i])

@@ -282,3 +282,25 @@ def test_compiled_lean_start_test_reads_the_condition_bound(monkeypatch):
     s._fast_cond = (s._fast_fact[0], 1e12)  # an inconclusive bound: the SVD test decides
     r = s.solve(1.3e-5 * COMPRESSION, x0=r.x, wrench0=r.wrench)
     assert r.path == "newton" and calls == [1]
+
+
+@pytest.mark.parametrize("jit", ["0", "1"])
+def test_lean_results_keep_their_numbers_after_later_solves_and_writes(jit, monkeypatch):
+    """A lean result's arrays are its own: after the whole sequence (later solves reuse the kernel's
+    buffers) and after its ``x`` is overwritten, its deferred fields (computed from the iteration's own
+    configuration) and its deferred eigenvalues are still the general path's, bit for bit."""
+    if jit == "1":
+        pytest.importorskip("numba")
+    monkeypatch.setenv("VJM_PIN_JIT", jit)
+    make, direction, top, steps = CASES["model-c"]
+    vm = make()
+    lean = _sequence(vm, direction, top, steps)
+    for r in lean:
+        r.x[:] = np.nan  # (a caller writing into a result's array)
+    _general(monkeypatch)
+    general = _sequence(vm, direction, top, steps)
+    for a, b in zip(lean, general):
+        for name in ("q", "theta", "wrench", "deflection", "position", "rotation"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+        assert a.energy == b.energy and a.stable == b.stable and a.residuals == b.residuals
+        np.testing.assert_array_equal(a.stability.eigenvalues, b.stability.eigenvalues)

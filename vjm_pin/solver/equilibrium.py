@@ -198,6 +198,17 @@ _compiled_kinematics = True
 _KERNEL_DUMMY = (np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 0)), np.zeros(0), np.zeros(0), np.zeros(0),
                  np.zeros((0, 0)), np.zeros(0), np.zeros((6, 0)))
 _NO_KEY = np.frombuffer(b"")  # no kept equilibrium (a read-only empty configuration; _fused_looped)
+_deferred_result = None  # vjm_pin.solver.deferred_result.deferred_result once imported (_load_deferred)
+
+
+def _load_deferred():
+    """:func:`vjm_pin.solver.deferred_result.deferred_result` (that module imports this one: bound
+    when first needed, not at every result)."""
+    global _deferred_result
+    from vjm_pin.solver.deferred_result import deferred_result
+
+    _deferred_result = deferred_result
+    return deferred_result
 
 
 class _Placement:
@@ -285,6 +296,7 @@ class EquilibriumResult:
 
 
 _ZERO3 = np.zeros(3).tobytes()  # +0.0 exactly (not -0.0)
+_F64 = np.dtype(np.float64)  # (``a.dtype is _F64``: the cheap test first, equality when it fails)
 _FROZEN_SPECS: dict = {}
 
 
@@ -1000,41 +1012,42 @@ class EquilibriumSolver:
         iteration in one compiled call (:func:`vjm_pin.solver.kernel._iterations_into`: the same
         iterates, tests and verdicts as the loop of :meth:`_fused_iterations`), then the same caches
         and result."""
-        kernel, kin = _kernel, self.kin
-        _, consts, cf, thr, step_fn, direct = ctx[:6]
-        _, kz, mask, theta0, vscale, escale = direct
-        defer = bool(len(ctx) > 7 and ctx[7]) and not eager
-        model = kin.model
-        nq = model.nq
+        kin = self.kin
+        plan = ctx[10] if len(ctx) > 10 else None
+        if plan is None or plan[0] is not kin or plan[1] is not ctx[4]:
+            plan = self._looped_plan(ctx)
+        _, step_fn, kbuf, ci, cf, kz, mask, theta0, vscale, escale, thr, d, nt, kt, _ = plan
+        defer = bool(ctx[7]) and not eager
         xout, ws = ctx[6]
-        kbuf = ctx[9] if len(ctx) > 9 else None
-        if kbuf is None:
-            kbuf = (np.empty((6, model.nv)), np.empty(3), np.empty((3, 3)))
-            ctx.append(kbuf)
         fact = self._fast_fact
-        dummy = _KERNEL_DUMMY
         if fact is not None and fact[1] is kin and fact[-1] is step_fn:
-            kx, have, kf, kpos, krot = np.frombuffer(fact[0]), True, fact[3:11], fact[2].position, fact[2].rotation
+            kx, have, kf, kst = np.frombuffer(fact[0]), True, fact[3:11], fact[2]
+            kpos, krot = kst.position, kst.rotation
         else:  # (kx read only, as np.frombuffer's: one compiled signature)
+            dummy = _KERNEL_DUMMY
             kx, have, kf, kpos, krot = _NO_KEY, False, dummy[:8], dummy[3], dummy[0]
-        lim = self._loop_limits(relaxed)
+        lim = self.__dict__.get("_lim")  # (_loop_limits)
+        if lim is None or lim[0][0] != self._fast_max_iter or lim[0][1] != relaxed:
+            lim = (None, self._loop_limits(relaxed))
         if not rt.flags.c_contiguous:
             rt = np.ascontiguousarray(rt)
         code, it, counted, _, ep, er, rs, reused = ck[0](
-            x, kx, have, kf, kpos, krot, ck[3], ck[4], rt, rot, flush, consts[0], cf, kz, mask, theta0, vscale,
-            escale, xout, ws, kbuf, thr, defer, lim)
+            x, kx, have, kf, kpos, krot, ck[3], ck[4], rt, rot, flush, ci, cf, kz, mask, theta0, vscale,
+            escale, xout, ws, kbuf, thr, defer, lim[1])
         if counted >= 0:
             self._fast_its = counted
-        if code != kernel.DONE:
+        if code != _kernel.DONE:
             return None
         x = xout.copy()
         key = x.tobytes()
         kf, ev, sym, info = ws[:8], ws[8], ws[9], ws[10]
-        ctx[6] = kernel.workspace(consts[0], nq)  # the buffers now belong to the caches: fresh ones
-        n, m = len(self.free), len(self.task)
-        if info[0]:  # stable, certified: the eigenvalues when first read
+        certified = info[0] != 0.0
+        # the buffers now belong to the caches: fresh ones (xout, info and an unused eigenvalue buffer
+        # are read above and kept, as kernel.workspace lays them out)
+        ctx[6] = (xout, _kernel.workspace_after(ws, certified, plan[14]))
+        if certified:  # stable, certified: the eigenvalues when first read
             ev = None
-            stab = SpectrumLater(True, n - m, thr, sym, kernel.spectrum)
+            stab = SpectrumLater.stable_now(d, thr, sym, _kernel.spectrum)
         else:
             stab = None
         jac, qf, rr, f, r, tau, hz, f6 = kf
@@ -1046,14 +1059,35 @@ class EquilibriumSolver:
             kin._last = (key, st)  # kin.evaluate(x, hessian=False) at this point: no Pinocchio call
         if stab is None:
             stable = bool(ev.size == 0 or ev[-1] < -thr)  # (ascending)
-            stab = self._kernel_stability(stable, ev, n - m, thr, jac, hz, st)
+            stab = self._kernel_stability(stable, ev, d, thr, jac, hz, st)
         res = {"position": float(ep), "orientation": float(er), "statics": float(rs)}
         wkey = key + f6.tobytes()
         self._fast_cache = (wkey + pt.tobytes() + rt.tobytes(), res, stab, x, f, f6, p_t, r_t)
         self._fast_fact = (key, kin, st, jac, qf, rr, f, r, tau, hz, f6, step_fn)
         self._fast_cond = (key, info[1])
-        remember_lazy(self.vm, kin, wkey, _blocks_builder(jac, hz, self.nt, self.vm.K_theta, st))
+        remember_lazy(self.vm, kin, wkey, _blocks_builder(jac, hz, nt, kt, st))
         return x, f, it, st, kf, ev, res, stab
+
+    def _looped_plan(self, ctx):
+        """The per-context constants of :meth:`_fused_looped`, kept as ``ctx``'s eleventh item (with
+        the kinematics' buffers ``(j6, pos, rot)`` as its tenth): ``(kinematics, step function,
+        buffers, ci, cf, kz, mask, θ₀, variable scales, error scales, threshold, d = n − m, nθ, K_θ, the
+        pool of fresh kernel buffers of :func:`vjm_pin.solver.kernel.workspace_after`)``."""
+        kin = self.kin
+        _, consts, cf, thr, step_fn, direct = ctx[:6]
+        _, kz, mask, theta0, vscale, escale = direct
+        while len(ctx) < 10:
+            ctx.append(None)
+        kbuf = ctx[9]
+        if kbuf is None:
+            kbuf = ctx[9] = (np.empty((6, kin.model.nv)), np.empty(3), np.empty((3, 3)))
+        plan = (kin, step_fn, kbuf, consts[0], cf, kz, mask, theta0, vscale, escale, thr,
+                len(self.free) - len(self.task), self.nt, self.vm.K_theta, [])
+        if len(ctx) > 10:
+            ctx[10] = plan
+        else:
+            ctx.append(plan)
+        return plan
 
     def _loop_limits(self, relaxed):
         """``(max_iter, polish steps, relaxed steps)`` of :func:`vjm_pin.solver.kernel._iterations_into`."""
@@ -1070,15 +1104,15 @@ class EquilibriumSolver:
         ``rotation``, ``energy``) computed when first read
         (:class:`~vjm_pin.solver.deferred_result.DeferredResult`: most results of a curve's steps are
         never read), by the same expressions: the same numbers."""
-        from vjm_pin.solver.deferred_result import deferred_result
-
         x, _, it, st, kf, _, res, stab = raw
         src = self.__dict__.get("_deferred_src")
         if src is None or src[0] is not self.vm or src[1] is not self.task:
             vm = self.vm
             src = self._deferred_src = (vm, self.task, tuple(self.task), self.p0, self.r0, vm.theta_idx, vm.theta0,
                                         vm.q_idx, vm.K_theta)
-        return deferred_result({
+        build = _deferred_result or _load_deferred()
+        # (the sources: the iteration's own x, which no one writes, the field a copy of its own)
+        return build({
             "x": x.copy(),
             "wrench": kf[7].copy(),
             "converged": True,
@@ -1090,7 +1124,7 @@ class EquilibriumSolver:
             "stability_end_held": stab,
             "warnings": () if stab.stable else (UNSTABLE_HELD_NOTE,),
             "checks": {},
-        }, (x.copy(), st.position, st.rotation) + src[3:])  # (x: a copy of its own, as the one above)
+        }, (x, st.position, st.rotation) + src[3:])
 
     def _fast_factor(self, x, f6, qfull, big):
         """The quantities of one :meth:`_fast_newton` iteration at ``x``: (state, J (task
@@ -1294,8 +1328,7 @@ class EquilibriumSolver:
 
     def _newton_safeguarded(self, x, f, p_t, r_t, max_iter):
         vm = self.vm
-        kz = np.zeros((len(self.free), len(self.free)))
-        kz[: self.nt, : self.nt] = vm.K_theta
+        kz = self._kz  # (K_θ ⊕ 0, read only)
         m = len(self.task)
         n = len(self.free)
         x, state, ok = self._restore(x.copy(), None, p_t, r_t, max_iter=40)
@@ -1633,7 +1666,7 @@ class EquilibriumSolver:
     def _target_pose(self, d):
         """The end pose ``displace(p0, r0, d)`` of the (6,) deflection ``d`` (without ``exp3`` for a
         zero rotation part: the same numbers)."""
-        if d[3:].tobytes() == _ZERO3:
+        if d.tobytes()[24:] == _ZERO3:  # (d[3:]'s bytes)
             return self.p0 + d[:3], self._r_unrotated.copy()
         return displace(self.p0, self.r0, d)
 
@@ -1816,15 +1849,21 @@ class EquilibriumSolver:
         iteration does not apply (another method, a task of 0 or ≥ n rows, no screw-form Hessian,
         the fused kernel switched off). ``VJM_PIN_JIT`` is read at every call, as
         :meth:`_fast_newton_fused` reads it."""
+        kernel = _kernel
+        kept = self._lean_ctx
+        if kept is not None and _fused_enabled:  # (the kept context's own test, cut to what can change)
+            kp = self._kpack
+            if (kp is not None and kp[1] is kept[0]
+                    and kp[0] == (self.tol, self.follow_stable, self.max_step, self.kscale, id(self.kin))
+                    and kept[1][4] is kernel.get(kernel.mode())):
+                return kept[1]
         m, n = len(self.task), len(self.free)
         if (m == 0 or m >= n or not _fused_enabled or self._smask is None
                 or not getattr(self.kin, "uses_screw", False)):
             return None
-        kernel = _kernel
         consts, thr = self._kernel_consts()
         md = kernel.mode()
         fn = kernel.get(md)
-        kept = self._lean_ctx
         if kept is not None and kept[0] is consts and kept[1][4] is fn:
             return kept[1]
         cf = consts[1].copy()  # its own target slots
@@ -1866,11 +1905,11 @@ class EquilibriumSolver:
         if self.method != "newton" or self._partial_task_rotation:
             return None
         fact = self._fast_fact
-        if (fact is None or fact[1] is not self.kin or type(x0) is not np.ndarray or x0.dtype != np.float64
-                or fact[0] != x0.tobytes() or x0.shape != (self.kin.model.nq,)):
-            return None
+        if (fact is None or fact[1] is not self.kin or type(x0) is not np.ndarray or x0.ndim != 1
+                or (x0.dtype is not _F64 and x0.dtype != _F64) or fact[0] != x0.tobytes()):
+            return None  # (x0 float64, 1-D, its bytes those of the (nq,) equilibrium: of shape (nq,))
         d = deflection
-        if type(d) is not np.ndarray or d.shape != (6,) or d.dtype != np.float64:
+        if type(d) is not np.ndarray or (d.dtype is not _F64 and d.dtype != _F64) or d.shape != (6,):
             return None
         # finite (a sum of Python floats: no overflow warning; a huge finite input overflows it to
         # inf and takes the general path, which accepts it) and zero outside the task
@@ -1879,7 +1918,7 @@ class EquilibriumSolver:
             return None
         if wrench0 is not None:
             w = wrench0
-            if type(w) is not np.ndarray or w.shape != (6,) or w.dtype != np.float64:
+            if type(w) is not np.ndarray or (w.dtype is not _F64 and w.dtype != _F64) or w.shape != (6,):
                 return None
             wl = w.tolist()
             if not math.isfinite(sum([wl[i] for i in self.task])):  # (task rows, as _task_wrench reads them)

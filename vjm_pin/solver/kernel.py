@@ -1069,6 +1069,27 @@ def workspace(ci, nq: int) -> tuple:
     return np.empty(nq), ws
 
 
+#: Workspaces carved per allocation by :func:`workspace_after` (each buffer a view of a block of this
+#: many: one ``numpy.empty`` per buffer kind and block instead of per buffer and solve).
+WORKSPACE_BLOCK = 32
+
+
+def workspace_after(ws: tuple, certified: bool, pool: list) -> tuple:
+    """Fresh buffers ``ws`` of :func:`_iterate_into` after a convergence into ``ws`` (whose arrays
+    then belong to the caller's caches), as :func:`workspace` lays them out (C-contiguous, writable,
+    never handed out before): ``info`` (read at once by the caller) and, for a verdict certified
+    without the eigenvalues (``certified``), the eigenvalue buffer (not written) are ``ws``'s own;
+    the others are views of blocks of :data:`WORKSPACE_BLOCK` buffers kept in ``pool`` (a list
+    owned by one caller's context, used by one thread: ``[blocks, next index]``)."""
+    blocks, i = pool if pool else (None, WORKSPACE_BLOCK)
+    if i >= WORKSPACE_BLOCK:
+        blocks = tuple(np.empty((WORKSPACE_BLOCK,) + ws[k].shape) for k in (0, 1, 2, 3, 4, 5, 6, 7, 9, 8))
+        i = 0
+    pool[:] = (blocks, i + 1)
+    return (blocks[0][i], blocks[1][i], blocks[2][i], blocks[3][i], blocks[4][i], blocks[5][i], blocks[6][i],
+            blocks[7][i], ws[8] if certified else blocks[9][i], blocks[8][i], ws[10])
+
+
 def _load_compiled():
     """The compiled iteration (numba, cached on disk), or False when numba cannot be imported."""
     global _compiled, _built
@@ -1113,14 +1134,26 @@ JIT_AFTER_ITERATIONS = 2000
 _numpy_iterations = 0
 
 
+_mode_read = (None, "auto")  # (the last VJM_PIN_JIT value read by mode(), its mode)
+
+
 def mode() -> str:
-    """``VJM_PIN_JIT`` read now: ``"0"`` (numpy), ``"1"`` (compiled) or ``"auto"``."""
-    v = os.environ.get("VJM_PIN_JIT", "auto").strip().lower()
+    """``VJM_PIN_JIT`` read now: ``"0"`` (numpy), ``"1"`` (compiled) or ``"auto"`` (the value's parse
+    kept while the value stays the same)."""
+    global _mode_read
+    raw = os.environ.get("VJM_PIN_JIT")
+    last = _mode_read
+    if raw == last[0]:
+        return last[1]
+    v = ("auto" if raw is None else raw).strip().lower()
     if v in ("0", "false", "no", "off"):
-        return "0"
-    if v in ("1", "true", "yes", "on"):
-        return "1"
-    return "auto"
+        md = "0"
+    elif v in ("1", "true", "yes", "on"):
+        md = "1"
+    else:
+        md = "auto"
+    _mode_read = (raw, md)
+    return md
 
 
 def loaded() -> bool:

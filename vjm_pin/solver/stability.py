@@ -104,6 +104,15 @@ class SpectrumLater(StabilityResult):
         object.__setattr__(self, "_spectrum_of", spectrum)
         object.__setattr__(self, "_spectrum", None)
 
+    @classmethod
+    def stable_now(cls, null_dim: int, tolerance: float, matrix: np.ndarray, spectrum) -> SpectrumLater:
+        """``SpectrumLater(True, null_dim, tolerance, matrix, spectrum)``, its fields set at once
+        (a warm-started solve builds one per point)."""
+        obj = object.__new__(cls)
+        obj.__dict__.update({"stable": True, "null_dim": int(null_dim), "tolerance": float(tolerance),
+                             "_matrix": matrix, "_spectrum_of": spectrum, "_spectrum": None})
+        return obj
+
     @property
     def eigenvalues(self) -> np.ndarray:
         ev = self._spectrum
