@@ -46,20 +46,19 @@ compiled Newton corrector factors ``Jᵀ`` at the converged configuration (House
 second QR (and no explicit ``Q``: the reflectors are applied where ``Q`` would multiply), decides the
 rank test from ``‖R‖_F ‖R⁻¹‖_F`` where that bound clears it (the SVD of ``R`` otherwise), and packs
 its constants into two arrays (one argument each). The compiled :func:`_point_loops` factors ``J``
-with the same algorithm (:func:`_qr_reflectors`) and shares the rest (:func:`_eq28_tangent`,
+with the same function (:func:`~vjm_pin.solver.kernel._qr_t`) and shares the rest (:func:`_eq28_tangent`,
 :func:`_margin_tail`): on the same ``J`` both give the same numbers.
 """
 
 from __future__ import annotations
 
-import math
 import sys
 
 import numpy as np
 
 from vjm_pin.kinematics.chain import FLUSH_BELOW
 from vjm_pin.solver.chain_kernel import _rate_lin, _rate_terms, _twist_rate_row, _twists
-from vjm_pin.solver.kernel import _back_substitute
+from vjm_pin.solver.kernel import _back_substitute, _qr_t, _reflect_rows
 from vjm_pin.solver.lapack import lapack as _lapack
 from vjm_pin.solver.stability import SCIPY_LAPACK_MAX_N
 from vjm_pin.solver.stiffness import SINGULAR_RCOND, _inverse_if_regular, eq28_matrix
@@ -582,7 +581,7 @@ def _point_loops(jfree, hz, kz, task, dt, mask, wrench, nt, use_rate, fast_rank,
     """The whole of :meth:`PointKernel.point` in one compiled call (numba, explicit loops and
     numba's ``np.linalg``): the equilibrated inverse of eq. (28) with the regularity test of
     :func:`~vjm_pin.solver.stiffness._inverse_if_regular` (:func:`_eq28_tangent`), a Householder QR of
-    ``Jᵀ`` (:func:`_qr_reflectors`, the corrector's own algorithm), the margin ``μ`` with its
+    ``Jᵀ`` (:func:`vjm_pin.solver.kernel._qr_t`, the corrector's own), the margin ``μ`` with its
     eigenvector and, with ``use_rate``, ``dμ/ds`` of :meth:`PointKernel.margin_rate`
     (:func:`_margin_tail`, shared with :func:`_reuse_point_loops`: on the same ``J`` the same numbers).
     Returns ``(status, k, δx, δF, μ, dμ/ds)``; ``status`` 0 when every number is valid, 1 when the
@@ -601,7 +600,7 @@ def _point_loops(jfree, hz, kz, task, dt, mask, wrench, nt, use_rate, fast_rank,
     ok, k = _eq28_tangent(jac, hz, kz, dt, nt, sing_rcond, xd, fd)
     if not ok:
         return 1, nan, xd, fd, nan, nan
-    hh = _qr_reflectors(jac, m, n)
+    hh = _qr_t(jac, m, n)
     st, mu, rate = _margin_tail(jfree, hh, hz, kz, task, dt, mask, wrench, use_rate, fast_rank, xd, fd)
     return st, k, xd, fd, mu, rate
 
@@ -737,77 +736,17 @@ def _q_vector(hh, v, m, n, transposed):
 
 
 def _q_both_sides(hh, a, m, n):
-    """``a ← Qᵀ a Q`` in place for an (n, n) ``a`` (the reflectors of :func:`_q_vector`; row operations
-    from the left, then on every row from the right)."""
-    s = np.empty(n)
-    for k in range(m):
-        t = hh[m, k]
-        if t == 0.0:
-            continue
-        for c in range(n):
-            s[c] = a[k, c]
-        for i in range(k + 1, n):
-            v = hh[k, i]
-            for c in range(n):
-                s[c] += v * a[i, c]
-        for c in range(n):
-            s[c] *= t
-            a[k, c] -= s[c]
-        for i in range(k + 1, n):
-            v = hh[k, i]
-            for c in range(n):
-                a[i, c] -= s[c] * v
+    """``a ← Qᵀ a Q`` in place for an (n, n) ``a`` (the reflectors of :func:`_q_vector`): the rows
+    by :func:`vjm_pin.solver.kernel._reflect_rows` (``Qᵀ a``), then every row ``r`` from the right
+    (``(Qᵀ a[r]ᵀ)ᵀ``, :func:`_q_vector`)."""
+    _reflect_rows(hh, a, m, n)
     for r in range(n):
-        for k in range(m):
-            t = hh[m, k]
-            if t == 0.0:
-                continue
-            sr = a[r, k]
-            for i in range(k + 1, n):
-                sr += a[r, i] * hh[k, i]
-            sr *= t
-            a[r, k] -= sr
-            for i in range(k + 1, n):
-                a[r, i] -= sr * hh[k, i]
-
-
-def _qr_reflectors(jac, m, n):
-    """Householder QR of ``Jᵀ`` (n × m) as the corrector's compiled kernel factors it
-    (:func:`vjm_pin.solver.kernel._qr_t`, dgeqr2 / dlarfg, the same operations): row k of the result
-    is column k of ``Jᵀ`` reduced, then the reflector ``v_k`` (``v_k[k] = 1`` implicit); row m holds
-    the ``τ_k`` (:func:`_q_vector`)."""
-    hh = np.zeros((m + 1, n))
-    hh[:m, :] = jac
-    for k in range(m):
-        alpha = hh[k, k]
-        xn2 = 0.0
-        for i in range(k + 1, n):
-            xn2 += hh[k, i] * hh[k, i]
-        xnorm = math.sqrt(xn2)
-        if xnorm == 0.0:
-            hh[m, k] = 0.0
-        else:
-            beta = -math.copysign(math.hypot(alpha, xnorm), alpha)
-            t = (beta - alpha) / beta
-            hh[m, k] = t
-            scal = 1.0 / (alpha - beta)
-            for i in range(k + 1, n):
-                hh[k, i] *= scal
-            hh[k, k] = beta
-            for j in range(k + 1, m):  # apply H_k to the remaining columns of Jᵀ
-                s = hh[j, k]
-                for i in range(k + 1, n):
-                    s += hh[j, i] * hh[k, i]
-                s *= t
-                hh[j, k] -= s
-                for i in range(k + 1, n):
-                    hh[j, i] -= s * hh[k, i]
-    return hh
+        _q_vector(hh, a[r], m, n, True)
 
 
 def _margin_tail(jfree, hh, hz, kz, task, dt, mask, wrench, use_rate, fast_rank, xd, fd):
     """The margin ``μ`` and, with ``use_rate``, ``dμ/ds`` of the point kernels (:func:`_point_loops`,
-    :func:`_reuse_point_loops`) from the reflectors ``hh`` of ``Jᵀ`` (:func:`_qr_reflectors`) and the
+    :func:`_reuse_point_loops`) from the reflectors ``hh`` of ``Jᵀ`` (:func:`~vjm_pin.solver.kernel._qr_t`) and the
     tangent ``(xd, fd)``: the rank test of ``J`` (:data:`FAST_RANK`; from ``‖R‖_F ‖R⁻¹‖_F ≥ σ_max/σ_min``
     where that bound clears it, else the singular values of ``R``), ``Vᵀ sym(H − K) V`` from ``QᵀAQ``
     (the m reflectors applied on both sides of ``A``: ``4mn²`` instead of the products with ``V``),
@@ -944,7 +883,10 @@ _compiled = None  # the compiled _point_loops once loaded, False when numba is u
 _reuse = None  # the compiled _reuse_point_loops once loaded (compiled())
 #: This module's njit helpers, compiled (before the kernels that call them) by compiled().
 _OWN_HELPERS = ("_top_eigpair", "_eq28_tangent", "_reduced", "_rate_value", "_householder_r", "_q_vector",
-                "_q_both_sides", "_qr_reflectors", "_margin_tail")
+                "_q_both_sides", "_margin_tail")
+#: The dense kernel's helpers (:mod:`vjm_pin.solver.kernel`) this module calls, compiled there once
+#: (numba's on-disk cache of this module does not see edits of kernel.py: clear ``__pycache__`` then).
+_KERNEL_HELPERS = ("_qr_t", "_reflect_rows")
 
 
 def _jit_mode() -> str:
@@ -964,19 +906,21 @@ def compiled():
         except Exception:  # noqa: BLE001 - any import failure: the numpy path
             _compiled = False
             return _compiled
-        from vjm_pin.solver import chain_kernel
+        from vjm_pin.solver import chain_kernel, kernel
 
         g = globals()
         try:
             chain_kernel._load()  # the dμ/ds helpers shared with the chain kernel, compiled there
             for name in chain_kernel.RATE_HELPERS:
                 g[name] = getattr(chain_kernel, name)
+            for name in _KERNEL_HELPERS:  # (chain_kernel._load has loaded the dense kernel)
+                g[name] = getattr(kernel, name)
             for name in _OWN_HELPERS:
                 g[name] = numba.njit(cache=True, **_NJIT)(g[name])
             _compiled = numba.njit(cache=True, **_NJIT)(_point_loops)
             _fused_load(numba, {"cache": True, **_NJIT})
         except RuntimeError:  # no writable cache location: compile in memory
-            for name in (*_OWN_HELPERS, *chain_kernel.RATE_HELPERS):
+            for name in (*_OWN_HELPERS, *chain_kernel.RATE_HELPERS, *_KERNEL_HELPERS):
                 fn = g[name]
                 g[name] = numba.njit(**_NJIT)(getattr(fn, "py_func", fn))
             _compiled = numba.njit(**_NJIT)(_point_loops)

@@ -164,6 +164,28 @@ def _factor0(starts, dpos, kp, cb, gens):
     return c == 0, bst, pinv, bu, fx, fy, bq, s, rho
 
 
+def _orthogonalise(x, vb, m, n):
+    """``x`` (n, 1) orthogonalised in place against the first ``m`` columns of the orthonormal
+    ``vb``, twice (each column's component removed in turn)."""
+    for _ in range(2):
+        for j in range(m):
+            c = 0.0
+            for i in range(n):
+                c += vb[i, j] * x[i, 0]
+            for i in range(n):
+                x[i, 0] -= c * vb[i, j]
+
+
+def _lower_solve(lo, b, z, m):
+    """``z ← L⁻¹ b`` (forward substitution; ``L = lo``, lower triangular, m × m; ``b``, ``z``
+    vectors of at least m entries, views allowed)."""
+    for i in range(m):
+        t = b[i]
+        for c in range(i):
+            t -= lo[i, c] * z[c]
+        z[i] = t / lo[i, i]
+
+
 def _start_loops(starts, dpos, kp, kd, jz, cb, wrench, scale, max_steps, vtol):
     """:meth:`HeldEigen.smallest_definite`: ``(status, λ₁, y)`` (status 0: certified).
 
@@ -197,13 +219,7 @@ def _start_loops(starts, dpos, kp, kd, jz, cb, wrench, scale, max_steps, vtol):
         nx0 = math.sqrt(np.sum(x * x))
         if not (math.isfinite(nx0) and nx0 > 0.0):
             return 2, 0.0, y[:, 0].copy()
-        for _ in range(2):
-            for j in range(m):
-                cc = 0.0
-                for i in range(n):
-                    cc += vb[i, j] * x[i, 0]
-                for i in range(n):
-                    x[i, 0] -= cc * vb[i, j]
+        _orthogonalise(x, vb, m, n)
         nx = math.sqrt(np.sum(x * x))
         invariant = not nx > 1e-12 * nx0  # the space holds an eigenvector: its Ritz pair is exact
         if not invariant:
@@ -275,18 +291,10 @@ def _ritz(ah, bh, m):
     # c = L⁻¹ bh L⁻ᵀ: forward substitution on the columns of bh, then on the rows
     y = np.zeros((m, m))
     for col in range(m):
-        for i in range(m):
-            t = bh[i, col]
-            for c in range(i):
-                t -= lo[i, c] * y[c, col]
-            y[i, col] = t / lo[i, i]
+        _lower_solve(lo, bh[:, col], y[:, col], m)
     cm = np.zeros((m, m))
     for row in range(m):
-        for i in range(m):
-            t = y[row, i]
-            for c in range(i):
-                t -= lo[i, c] * cm[row, c]
-            cm[row, i] = t / lo[i, i]
+        _lower_solve(lo, y[row], cm[row], m)
     for i in range(m):
         for j in range(i + 1, m):
             t = 0.5 * (cm[i, j] + cm[j, i])
@@ -381,13 +389,7 @@ def _pencil_loops(starts, dpos, kp, kd, jz, cb, w0, w1, y0, rtol, max_steps, cer
         nx0 = math.sqrt(np.sum(x * x))
         if not (math.isfinite(nx0) and nx0 > 0.0):
             return 3, 0.0, y[:, 0].copy(), False
-        for _ in range(2):
-            for j in range(m):
-                c = 0.0
-                for i in range(n):
-                    c += vb[i, j] * x[i, 0]
-                for i in range(n):
-                    x[i, 0] -= c * vb[i, j]
+        _orthogonalise(x, vb, m, n)
         nx = math.sqrt(np.sum(x * x))
         if not nx > 1e-12 * nx0:  # the space is invariant: its Ritz value is the root's
             break
@@ -408,45 +410,23 @@ def _setup_loops(j6, cols, task, rows, has_rows, ratio):
     ``jz`` is finite, ``0 < k < n`` and the singular values of ``cb`` (those of ``R`` in its QR,
     the point kernel's rank test) have a ratio above ``ratio``."""
     n = cols.shape[0]
-    m = task.shape[0]
-    jz = np.empty((6, n))
-    for c in range(n):
-        for a_ in range(6):
-            jz[a_, c] = j6[a_, cols[c]]
+    jz, cb = _gather(j6, cols, task)
     if has_rows:
-        k = rows.shape[0]
-        cb = np.zeros((k, n))
-        for r_ in range(k):
-            for i in range(m):
-                ri = rows[r_, i]
-                for c in range(n):
-                    cb[r_, c] += ri * jz[task[i], c]
-    else:
-        k = m
-        cb = np.empty((k, n))
-        for i in range(m):
-            for c in range(n):
-                cb[i, c] = jz[task[i], c]
+        cb = _held_rows(rows, cb)
+    k = cb.shape[0]
     for c in range(n):
         for a_ in range(6):
             if not math.isfinite(jz[a_, c]):
                 return 1, jz, cb
     if k == 0 or k >= n:
         return 2, jz, cb
-    hh = _qr_t(cb, k, n)
-    rmat = np.zeros((k, k))
-    for i in range(k):
-        for j in range(i, k):
-            rmat[i, j] = hh[j, i]
-            if not math.isfinite(hh[j, i]):
-                return 3, jz, cb
-    sv = np.linalg.svd(rmat)[1]
-    if not sv[k - 1] > ratio * sv[0]:
-        return 4, jz, cb
+    if not _qr_rank(cb, k, n, ratio)[0]:
+        return 3, jz, cb
     return 0, jz, cb
 
 
-_w_gens = _bordered = _count = _raw_solve = _matvec = _qr_t = _project = None  # the chain kernel's, set by _loops()
+# the chain kernel's, set by _loops()
+_w_gens = _bordered = _count = _raw_solve = _matvec = _project = _gather = _held_rows = _qr_rank = None
 _LOOPS: list = []
 _LOCK = threading.Lock()
 
@@ -462,18 +442,20 @@ def _loops():
             import numba
 
             g = globals()
-            for name in ("_w_gens", "_bordered", "_count", "_raw_solve", "_matvec", "_qr_t", "_project"):
+            for name in ("_w_gens", "_bordered", "_count", "_raw_solve", "_matvec", "_project", "_gather",
+                         "_held_rows", "_qr_rank"):
                 g[name] = getattr(_ck, name)
             fns = [
                 getattr(g[n], "py_func", g[n])
-                for n in ("_factor0", "_ritz", "_start_loops", "_pencil_loops", "_setup_loops")
+                for n in ("_factor0", "_ritz", "_orthogonalise", "_lower_solve", "_start_loops", "_pencil_loops",
+                          "_setup_loops")
             ]
             try:
                 jit = [numba.njit(cache=True, nogil=True)(f) for f in fns]
             except RuntimeError:  # no writable cache location: compile in memory
                 jit = [numba.njit(nogil=True)(f) for f in fns]
-            g["_factor0"], g["_ritz"] = jit[0], jit[1]
-            _LOOPS.append((jit[2], jit[3], jit[4]))
+            g["_factor0"], g["_ritz"], g["_orthogonalise"], g["_lower_solve"] = jit[:4]
+            _LOOPS.append((jit[4], jit[5], jit[6]))
     return _LOOPS[0]
 
 

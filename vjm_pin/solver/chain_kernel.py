@@ -526,6 +526,35 @@ def _gather(jsrc, idx, task):
     return jz, cb
 
 
+def _held_rows(rows, cb):
+    """The held rows ``P J`` (k, n): ``rows`` (k, m) times the task rows ``cb`` (m, n), each sum in
+    the order of the task rows (as the point kernel forms them)."""
+    k = rows.shape[0]
+    m, n = cb.shape
+    ch = np.zeros((k, n))
+    for a_ in range(k):
+        for i in range(m):
+            pa = rows[a_, i]
+            for c in range(n):
+                ch[a_, c] += pa * cb[i, c]
+    return ch
+
+
+def _qr_rank(cb, m, n, ratio):
+    """The Householder QR of ``cbᵀ`` (:func:`~vjm_pin.solver.kernel._qr_t`; ``cb`` (m, n), m ≤ n),
+    its ``R`` and the rank test: ``(ok, hh, R)``, ok when ``R`` is finite and its singular values
+    (those of ``cb``) have a ratio above ``ratio``."""
+    hh = _qr_t(cb, m, n)
+    rmat = np.zeros((m, m))
+    for i in range(m):
+        for j in range(i, m):
+            rmat[i, j] = hh[j, i]
+            if not math.isfinite(hh[j, i]):
+                return False, hh, rmat
+    sv = np.linalg.svd(rmat)[1]
+    return sv[m - 1] > ratio * sv[0], hh, rmat
+
+
 def _twists(jz):
     """The columns of a (6, n) Jacobian as rows: ``(v, ω)``, each (n, 3)."""
     n = jz.shape[1]
@@ -717,15 +746,8 @@ def _point_chain(J6, cols, order, task, dt, prow, starts, dpos, kd, kp, kscale, 
         return NEED_DENSE, nan, xd, fd, nan, nan, novec
     jz, cb = _gather(J6, cols, task)
     # rank test of J (FAST_RANK) and its QR for the multiplier g
-    hh = _qr_t(cb, m, n)
-    rmat = np.zeros((m, m))
-    for i in range(m):
-        for j in range(i, m):
-            rmat[i, j] = hh[j, i]
-            if not math.isfinite(hh[j, i]):
-                return NEED_DENSE, nan, xd, fd, nan, nan, novec
-    sv = np.linalg.svd(rmat)[1]
-    if not sv[m - 1] > fast_rank * sv[0]:
+    ok, hh, rmat = _qr_rank(cb, m, n, fast_rank)
+    if not ok:
         return NEED_DENSE, nan, xd, fd, nan, nan, novec
     # tangent of eq. (29): W δx − Jᵀ δF = 0, J δx = d_t
     wd, wu, wv, wp, wq = _w_gens(jz, wrench, starts, kd, False)
@@ -749,13 +771,7 @@ def _point_chain(J6, cols, order, task, dt, prow, starts, dpos, kd, kp, kscale, 
         if not math.isfinite(xs[c, 0]):
             return NEED_DENSE, nan, xd, fd, nan, nan, novec
     # μ: the largest eigenvalue of Vᵀ sym(H − K) V, V the null space of P J: −λ₁
-    kh = prow.shape[0]
-    ch = np.zeros((kh, n))
-    for a_ in range(kh):
-        for i in range(m):
-            pa = prow[a_, i]
-            for c in range(n):
-                ch[a_, c] += pa * cb[i, c]
+    ch = _held_rows(prow, cb)
     ok, lam1, w = _smallest(starts, dpos, kp, jz, wrench, kd, ch, kscale, has_guess, gvec, VEC_TOL_MARGIN)
     if not ok:
         return NEED_DENSE, nan, xd, fd, nan, nan, novec
@@ -816,8 +832,8 @@ def _point_chain(J6, cols, order, task, dt, prow, starts, dpos, kd, kp, kscale, 
 # =========================================================================== loading, layout
 _COMPILED: list = []  # [(iterate, point)] once loaded, [None] when numba is unavailable
 _HELPERS = ("_w_gens", "_bordered", "_factor", "_shifted", "_raw_solve", "_kkt_solve", "_count", "_project",
-            "_rayleigh", "_inverse", "_split", "_smallest", "_gather", "_twists", "_twist_rate_row", "_rate_terms",
-            "_rate_lin")
+            "_rayleigh", "_inverse", "_split", "_smallest", "_gather", "_held_rows", "_qr_rank", "_twists",
+            "_twist_rate_row", "_rate_terms", "_rate_lin")
 #: The ones :func:`vjm_pin.analysis.point_kernel._point_loops` calls too.
 RATE_HELPERS = ("_back_substitute", "_twists", "_twist_rate_row", "_rate_terms", "_rate_lin")
 #: The dense kernel's helpers (vjm_pin.solver.kernel) this kernel calls, compiled there once (the block
