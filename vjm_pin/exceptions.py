@@ -259,3 +259,24 @@ class NoCriticalPoint(VjmError):
     def __init__(self, message: str, max_deflection: float = float("nan")):
         self.max_deflection = max_deflection
         super().__init__(message)
+
+
+class FreeMechanism(InputError):
+    """With the end held only along the direction (``free=True``, ``--free``) the model is a
+    mechanism at the start of the path: the loaded stiffness matrix on the motions the run
+    leaves free (closures and the one held row) is singular there (e.g. passive joints with no
+    load on them), so the end has no stiffness across the direction and the path is undefined.
+    Raised before any tracing by ``trace_curve`` and ``critical_load``.
+
+    Attributes:
+        model: The model's name.
+        components: The task components (names, ``"x"`` … ``"rz"``) the zero-stiffness motions
+            move the end in (empty: an internal mechanism that leaves the end in place).
+        eigenvalues: The zero eigenvalues (within the stability tolerance) of that matrix.
+    """
+
+    def __init__(self, message: str, model: str = "", components=(), eigenvalues=()):
+        self.model = model
+        self.components = tuple(components)
+        self.eigenvalues = tuple(eigenvalues)
+        super().__init__(message)

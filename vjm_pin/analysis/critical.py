@@ -99,6 +99,7 @@ from vjm_pin.analysis.curve import (
     _reference_x,
     _Tracer,
     _unloaded,
+    check_free_start,
 )
 from vjm_pin.analysis.mechanism_curve import MechanismTracer, check_free_direction
 from vjm_pin.analysis.point_kernel import use_compiled
@@ -597,6 +598,8 @@ def _critical_mechanism(vm, d, solver, max_deflection, rtol, max_iter, loads, gr
     r0 = max_deflection or (1.0 if rotation else solver.length_scale)
     tr = MechanismTracer(vm, d, r0, solver, 1e3 * rtol, free)
     p0, rigid = tr.start()
+    if free:
+        check_free_start(vm, tr, p0)  # a mechanism with only d held: no path to search
     if rigid or not np.isfinite(p0.k):
         return _rigid(vm, tr, p0, d)
     if p0.mu >= 0:
@@ -879,6 +882,8 @@ def critical_load(
     Raises:
         InputError: bad direction or options, a solver of the wrong kind or for another model,
             dead loads given both here and to the solver, ``free`` along a rotation.
+        FreeMechanism: with ``free`` the start is a mechanism (a motion of zero stiffness with
+            only ``d`` held, :func:`~vjm_pin.analysis.curve.check_free_start`).
         NoCriticalPoint: the followed branch stays stable under a force along the direction
             up to ``max_deflection``.
         NoEquilibrium: no unloaded equilibrium to start from.
@@ -1065,11 +1070,13 @@ def _rigid(vm, tr, p0, d) -> CriticalLoad:
     configuration (deflection 0; always a bifurcation, as in ``trace_curve``)."""
     found = tr.rigid_start(p0) if p0.mu < 0 else None
     if found is None:
-        raise NoCriticalPoint(
-            "the chain is rigid along the direction at the unloaded configuration and no force "
-            "along it makes it unstable",
-            max_deflection=0.0,
+        what = (
+            "the stiffness along the direction is undefined at the start (its loaded stiffness "
+            "matrix is singular there)"
+            if np.isnan(p0.k)
+            else "the chain is rigid along the direction at the unloaded configuration"
         )
+        raise NoCriticalPoint(f"{what} and no force along it makes it unstable", max_deflection=0.0)
     f, u = found
     eq = u.eq
     if isinstance(tr, MechanismTracer):

@@ -1386,6 +1386,54 @@ def _mechanism_solver(vm, solver, loads, gravity, what: str) -> MechanismSolver:
     return solver
 
 
+def check_free_start(vm, tr, p0) -> None:
+    """``free=True``: refuse a start that is a mechanism with only ``d`` held.
+
+    ``p0`` is the first point of the mechanism tracer (:meth:`MechanismTracer.start`). Its
+    verdict for the control as run (eq. 23 on the null space ``Z`` of ``[C; dᵀJ]``) and its
+    force-control margin ``μ`` (on the null space of ``C``: nothing held with ``free``) are the
+    start's own quantities. When an eigenvalue of the former, or ``μ``, lies within the
+    stability tolerance of zero the model has a motion of zero stiffness there (passive joints
+    with no load on them: the Model C column pinned at its base swings across ``d``, Model B
+    along it): the tangent of eq. (28) is undefined or the force stays zero to rounding, and
+    the "critical points" found along the path are rounding noise. The eigenvectors of those
+    eigenvalues name the task components the motion moves the end in (rotations scaled by the
+    chain length).
+
+    Raises:
+        FreeMechanism: such a start (a one-line message naming the model and components).
+    """
+    from vjm_pin.exceptions import FreeMechanism
+    from vjm_pin.model.format import COMPONENTS
+    from vjm_pin.solver.mechanism import _null_basis
+
+    tol, lin = float(p0.run.tolerance), p0.lin
+    if np.any(np.abs(p0.run.eigenvalues) <= tol):
+        z = p0.z_run  # across d
+    elif abs(p0.mu) <= tol:  # along d: nothing held but the closures
+        z = _null_basis(np.vstack([lin.closure_jacobian, tr.p_rows @ lin.task_jacobian]), tr.run.rank_rtol)[0]
+    else:
+        return
+    red = -(z.T @ lin.hessian @ z)
+    w, v = np.linalg.eigh(0.5 * (red + red.T))
+    zero = np.abs(w) <= tol
+    modes = z @ v[:, zero]
+    task = list(tr.solver.task)
+    move = np.abs(lin.task_jacobian[task] @ modes).max(axis=1, initial=0.0)
+    move = move * np.where(np.array(task) >= 3, tr.solver.length_scale, 1.0)
+    comps = [COMPONENTS[c] for c, m in zip(task, move) if m > 1e-6 * max(move.max(initial=0.0), 1e-300)]
+    along = np.abs(tr.d @ lin.task_jacobian @ modes).max(initial=0.0) > 1e-6 * max(move.max(initial=0.0), 1e-300)
+    where = (f"it moves the end in {', '.join(comps)}{' (along the direction)' if along else ''} with zero "
+             "stiffness" if comps else "an internal motion has zero stiffness (the end stays in place)")
+    raise FreeMechanism(
+        f"with the end held only along the direction (free=True, --free) model '{vm.name}' is a "
+        f"mechanism at the start: {where} ({int(zero.sum())} zero eigenvalue(s) of its loaded "
+        "stiffness matrix, which is singular there); hold the end in every task component (no free) "
+        "or add springs or loads that stiffen it",
+        model=vm.name, components=comps, eigenvalues=w[zero],
+    )
+
+
 def _trace_mechanism(vm, d, max_deflection, steps, solver, refine_tol, all_branches, progress, loads, gravity, free):
     """:func:`trace_curve` on :class:`~vjm_pin.solver.mechanism.MechanismSolver`
     (:mod:`vjm_pin.analysis.mechanism_curve`)."""
@@ -1401,6 +1449,8 @@ def _trace_mechanism(vm, d, max_deflection, steps, solver, refine_tol, all_branc
     tr = MechanismTracer(vm, d, max_deflection, solver, refine_tol, bool(free))
     s_grid = [max_deflection * i / steps for i in range(steps + 1)]
     first, rigid = tr.start()
+    if free:
+        check_free_start(vm, tr, first)
     points, critical = _follow(tr, first, rigid or not np.isfinite(first.k), s_grid, progress, curve_point)
     return Curve(direction=d, points=points, critical=tuple(critical), free=bool(free),
                  loads=tuple(solver.loads.loads))
@@ -1459,6 +1509,8 @@ def trace_curve(
     Raises:
         InputError: bad direction, range, steps or tolerance; ``all_branches`` or a serial
             solver with closures, dead loads or ``free``.
+        FreeMechanism: with ``free`` the start is a mechanism (a motion of zero stiffness with
+            only ``d`` held, :func:`check_free_start`), before any tracing.
         NoEquilibrium: no equilibrium at some point of the range.
     """
     d = _direction(vm, direction)
