@@ -77,7 +77,7 @@ def add_parser(sub):
         "--free",
         action="store_true",
         help="hold only the component along DIRECTION: the end (a parallel robot's platform) is free "
-        "across it, with no load there (default: every task component held)",
+        "across it, with no load there (default: every task component held); a model that is then a mechanism (no stiffness across DIRECTION at the start) is refused, exit 2",
     )
     add_dead_load_options(p)
     p.add_argument(

@@ -108,7 +108,7 @@ def _add_options(p) -> None:
         "--free",
         action="store_true",
         help="hold only the component along DIRECTION: the end (a parallel robot's platform) is free "
-        "across it, with no load there (default: every task component held, nothing moves across it)",
+        "across it, with no load there (default: every task component held, nothing moves across it); a model that is then a mechanism (no stiffness across DIRECTION at the start) is refused, exit 2",
     )
     add_dead_load_options(p)
     p.add_argument(
