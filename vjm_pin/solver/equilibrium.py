@@ -831,6 +831,18 @@ class EquilibriumSolver:
             ctx[4], ctx[5] = fn, ((lean,) + consts[2:] if lean is not None else None)
             ctx[6] = kernel.workspace(consts[0], self.kin.model.nq) if lean is not None else None
         self._fast_its = 0
+        plan = ctx[10] if len(ctx) > 10 else None
+        if plan is not None and plan[1] is ctx[4] and plan[0] is self.kin and flushed:
+            # the looped path set up for this step function (_fused_looped's plan): _fused_iterations'
+            # preamble for it, inline (the same arguments; x used as it is, see there)
+            pt = np.asarray(p_t, float)
+            rt = np.asarray(r_t, float)
+            ctx[2][9:12] = pt  # kernel.with_target
+            if not (type(x) is np.ndarray and x.dtype == np.float64 and x.ndim == 1 and x.flags.c_contiguous
+                    and x.flags.writeable):
+                x = np.array(x, dtype=float)
+            return self._fused_looped(ctx, ctx[8], x, p_t, r_t, pt, rt, self._ir.size > 0,
+                                      bool(_chain._flush_enabled), 0, False)
         return self._fused_iterations(ctx, p_t, r_t, x, flushed)
 
     def _fused_iterations(self, ctx, p_t, r_t, x, flushed: bool = False, relaxed: int = 0, eager: bool = False):
@@ -869,15 +881,19 @@ class EquilibriumSolver:
         cf[9:12] = pt  # kernel.with_target
         rot = self._ir.size > 0
         flush = bool(chain._flush_enabled)
-        x = np.array(x, dtype=float)
-        if not flushed:
-            fact = self._fast_fact
-            if fact is None or fact[0] != x.tobytes():  # (the last equilibrium is flushed already)
-                flush_tiny(x)
         # the compiled kernel's kinematics: compiled too (kinematics/compiled_chain.py) where the chain
         # applies; the whole iteration in one compiled call with the direct call (_fused_looped)
         ck = self._compiled_chain(ctx) if getattr(step_fn, "dispatcher", None) is not None else None
-        if ck is not None and direct is not None and ck[0] is not None:
+        looped = ck is not None and direct is not None and ck[0] is not None
+        # (x used as it is on the looped path: _iterations_into copies its start, never writes it)
+        if not (looped and flushed and type(x) is np.ndarray and x.dtype == np.float64 and x.ndim == 1
+                and x.flags.c_contiguous and x.flags.writeable):
+            x = np.array(x, dtype=float)
+            if not flushed:
+                fact = self._fast_fact
+                if fact is None or fact[0] != x.tobytes():  # (the last equilibrium is flushed already)
+                    flush_tiny(x)
+        if looped:
             return self._fused_looped(ctx, ck, x, p_t, r_t, pt, rt, rot, flush, relaxed, eager)
         model, fid, data = kin.model, kin.frame_id, None  # data: kin.data when first needed
         lwa = pin.LOCAL_WORLD_ALIGNED
