@@ -77,3 +77,30 @@ def random_vjm(
         "links": links,
     }
     return load_vjm(generate_vjm(urdf, spec))
+
+
+def ur5_link_springs():
+    """ur5 (example-robot-data) with 6-D springs of aluminium tubes in its five links (skipped
+    without example-robot-data)."""
+    import pytest
+
+    pytest.importorskip("example_robot_data")
+    from vjm_pin.model.robots import build_robot
+
+    links = ("shoulder_link", "upper_arm_link", "forearm_link", "wrist_1_link", "wrist_2_link")
+    beam = {"section": "tube", "outer_diameter": 0.09, "wall": 0.005, "E": 7.0e10, "nu": 0.33}
+    return build_robot("ur5", springs={"links": {ln: {"beam": dict(beam)} for ln in links}}).vm
+
+
+def warm_sequence(vm, direction, top, steps, **options):
+    """Warm-started solves along ``direction`` up to ``top`` in ``steps`` (each from the previous
+    equilibrium), by an ``EquilibriumSolver(vm, **options)``."""
+    from vjm_pin.solver.equilibrium import EquilibriumSolver
+
+    s = EquilibriumSolver(vm, **options)
+    prev = s.solve(top / steps * direction)
+    out = [prev]
+    for t in np.linspace(top / steps, top, steps)[1:]:
+        prev = s.solve(t * direction, x0=prev.x, wrench0=prev.wrench)
+        out.append(prev)
+    return out

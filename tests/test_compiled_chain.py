@@ -28,7 +28,7 @@ from vjm_pin.solver import equilibrium as eqmod
 from vjm_pin.solver import kernel
 from vjm_pin.solver.equilibrium import EquilibriumSolver
 
-from .chains import random_vjm
+from .chains import random_vjm, ur5_link_springs, warm_sequence
 
 numba = pytest.importorskip("numba")
 
@@ -38,15 +38,6 @@ def fns():
     got = compiled_chain.compiled()
     assert got is not None, "numba is installed: the compiled kinematics must load"
     return got
-
-
-def _ur5_links():
-    pytest.importorskip("example_robot_data")
-    from vjm_pin.model.robots import build_robot
-
-    links = ("shoulder_link", "upper_arm_link", "forearm_link", "wrist_1_link", "wrist_2_link")
-    beam = {"section": "tube", "outer_diameter": 0.09, "wall": 0.005, "E": 7.0e10, "nu": 0.33}
-    return build_robot("ur5", springs={"links": {ln: {"beam": dict(beam)} for ln in links}}).vm
 
 
 def _random_placement(rng):
@@ -80,7 +71,7 @@ def _of(vm):
 MODELS = {
     "model-c": lambda: _of(resolve_model("paper-c-s")),
     "model-c-k8": lambda: _of(load_vjm(paper_model_urdf("c", "s", beam=PAPER_BEAM, subdivide=8))),
-    "ur5-link-springs": lambda: _of(_ur5_links()),
+    "ur5-link-springs": lambda: _of(ur5_link_springs()),
     "random-prismatic": lambda: _of(random_vjm(3, n_joints=6, n_passive=1, link_springs=2)),
     "unaligned-tree": _unaligned_tree,
 }
@@ -173,20 +164,10 @@ def test_table_refuses_other_joints():
     assert compiled_chain.chain_table(model, fid) is None
 
 
-def _sequence(vm, direction, top, steps):
-    s = EquilibriumSolver(vm)
-    prev = s.solve(top / steps * direction)
-    out = [prev]
-    for t in np.linspace(top / steps, top, steps)[1:]:
-        prev = s.solve(t * direction, x0=prev.x, wrench0=prev.wrench)
-        out.append(prev)
-    return out
-
-
 SOLVES = {
     # through the buckling of the straight column: the lean path gives way, an escape, restorations
     "model-c": (lambda: resolve_model("paper-c-s"), COMPRESSION, max_deflection(), 30),
-    "ur5": (_ur5_links, np.array([0.0, 0.0, -1.0, 0.0, 0.0, 0.0]), 1e-3, 12),
+    "ur5": (ur5_link_springs, np.array([0.0, 0.0, -1.0, 0.0, 0.0, 0.0]), 1e-3, 12),
 }
 
 
@@ -210,7 +191,7 @@ def test_solves_with_compiled_kinematics_match(case, fns, monkeypatch):
     vm = make()
     assert kernel.looped() is not None and kernel.restore_looped() is not None
     monkeypatch.setenv("VJM_PIN_JIT", "0")
-    twin = _sequence(vm, direction, top, steps)
+    twin = warm_sequence(vm, direction, top, steps)
     monkeypatch.setenv("VJM_PIN_JIT", "1")
     calls = []
     looped = kernel.looped()
@@ -229,11 +210,11 @@ def test_solves_with_compiled_kinematics_match(case, fns, monkeypatch):
         return ck
 
     monkeypatch.setattr(EquilibriumSolver, "_compiled_chain", spy)
-    fast = _sequence(vm, direction, top, steps)
+    fast = warm_sequence(vm, direction, top, steps)
     monkeypatch.undo()
     monkeypatch.setenv("VJM_PIN_JIT", "1")
     monkeypatch.setattr(eqmod, "_compiled_kinematics", False)
-    pinned = _sequence(vm, direction, top, steps)
+    pinned = warm_sequence(vm, direction, top, steps)
     assert len(calls) >= steps - 1  # the warm-started solves ran the compiled loop
     if case == "model-c":
         assert any("escape" in r.path for r in fast)
@@ -247,7 +228,7 @@ def test_restoration_with_compiled_kinematics(fns, monkeypatch):
     """``_restore`` in one compiled call (kinematics included) against its numpy loop (Pinocchio's
     kinematics) from configurations pushed off an equilibrium and from a far start: the same
     iterate to rounding and the same verdict; the state returned is the kinematics at that iterate."""
-    vm = _ur5_links()
+    vm = ur5_link_springs()
     s = EquilibriumSolver(vm)
     d = np.zeros(6)
     d[2] = -1e-4

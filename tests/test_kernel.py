@@ -23,7 +23,7 @@ from vjm_pin.solver.blocks import evaluate_blocks
 from vjm_pin.solver.equilibrium import EquilibriumSolver
 from vjm_pin.solver.stability import check_stability
 
-from .chains import random_vjm
+from .chains import random_vjm, ur5_link_springs
 
 numba = pytest.importorskip("numba")
 
@@ -40,19 +40,10 @@ def compiled():
     return fn
 
 
-def _ur5_links():
-    pytest.importorskip("example_robot_data")
-    from vjm_pin.model.robots import build_robot
-
-    links = ("shoulder_link", "upper_arm_link", "forearm_link", "wrist_1_link", "wrist_2_link")
-    beam = {"section": "tube", "outer_diameter": 0.09, "wall": 0.005, "E": 7.0e10, "nu": 0.33}
-    return build_robot("ur5", springs={"links": {ln: {"beam": dict(beam)} for ln in links}}).vm
-
-
 CASES = {
     "model-c": lambda: resolve_model("paper-c-s"),
     "model-c-k2": lambda: load_vjm(paper_model_urdf("c", "s", beam=PAPER_BEAM, subdivide=2)),
-    "ur5-link-springs": _ur5_links,
+    "ur5-link-springs": ur5_link_springs,
     "prismatic-6row": lambda: random_vjm(3, n_joints=6, n_passive=1, link_springs=2),
     "prismatic-3row": lambda: random_vjm(4, n_joints=5, n_passive=2, link_springs=2, task=("x", "y", "z")),
 }

@@ -18,26 +18,7 @@ from vjm_pin.exceptions import InputError
 from vjm_pin.model.registry import resolve_model
 from vjm_pin.solver import EquilibriumSolver
 
-
-def _ur5():
-    """UR5 with 6-D link springs (more free coordinates than task rows: the fused iteration applies)."""
-    pytest.importorskip("example_robot_data")
-    from vjm_pin.model.robots import build_robot
-
-    links = ("shoulder_link", "upper_arm_link", "forearm_link", "wrist_1_link", "wrist_2_link")
-    beam = {"section": "tube", "outer_diameter": 0.09, "wall": 0.005, "E": 7.0e10, "nu": 0.33}
-    return build_robot("ur5", springs={"links": {ln: {"beam": dict(beam)} for ln in links}}).vm
-
-
-def _sequence(vm, direction, top, steps, **options):
-    """Warm-started solves along ``direction`` (each from the previous equilibrium)."""
-    s = EquilibriumSolver(vm, **options)
-    prev = s.solve(top / steps * direction)
-    out = [prev]
-    for t in np.linspace(top / steps, top, steps)[1:]:
-        prev = s.solve(t * direction, x0=prev.x, wrench0=prev.wrench)
-        out.append(prev)
-    return out
+from .chains import ur5_link_springs, warm_sequence
 
 
 def _general(monkeypatch):
@@ -57,7 +38,7 @@ def _assert_same(a, b):
 CASES = {
     # through the buckling of the straight column: a fallback to the safeguarded path and an escape
     "model-c": (lambda: resolve_model("paper-c-s"), COMPRESSION, max_deflection(), 30),
-    "ur5": (_ur5, np.array([0.0, 0.0, -1.0, 0.0, 0.0, 0.0]), 1e-3, 12),
+    "ur5": (ur5_link_springs, np.array([0.0, 0.0, -1.0, 0.0, 0.0, 0.0]), 1e-3, 12),
 }
 
 
@@ -78,10 +59,10 @@ def test_lean_path_gives_the_general_path_results_bit_for_bit(case, jit, monkeyp
         return out
 
     monkeypatch.setattr(EquilibriumSolver, "_solve_lean", spy)
-    lean = _sequence(vm, direction, top, steps)
+    lean = warm_sequence(vm, direction, top, steps)
     assert sum(calls) >= steps // 2  # the lean path did run (and found the equilibria)
     _general(monkeypatch)
-    general = _sequence(vm, direction, top, steps)
+    general = warm_sequence(vm, direction, top, steps)
     assert len(lean) == len(general)
     for a, b in zip(lean, general):
         _assert_same(a, b)
@@ -93,9 +74,9 @@ def test_lean_path_follows_the_unstable_branch_like_the_general_path(monkeypatch
     """``follow_stable=False``: the straight column is followed past its buckling (unstable), by the
     lean path as by the general one, bit for bit."""
     vm = resolve_model("paper-c-s")
-    lean = _sequence(vm, COMPRESSION, max_deflection(), 20, follow_stable=False)
+    lean = warm_sequence(vm, COMPRESSION, max_deflection(), 20, follow_stable=False)
     _general(monkeypatch)
-    general = _sequence(vm, COMPRESSION, max_deflection(), 20, follow_stable=False)
+    general = warm_sequence(vm, COMPRESSION, max_deflection(), 20, follow_stable=False)
     for a, b in zip(lean, general):
         _assert_same(a, b)
     assert not lean[-1].stable  # past buckling on the straight branch
@@ -157,7 +138,7 @@ def _escape_results(monkeypatch, handoff: bool):
         return out
 
     monkeypatch.setattr(EquilibriumSolver, "_relaxed_local", spy)
-    out = _sequence(resolve_model("paper-c-s"), COMPRESSION, max_deflection(), 30)
+    out = warm_sequence(resolve_model("paper-c-s"), COMPRESSION, max_deflection(), 30)
     monkeypatch.undo()
     return out, spent
 
@@ -236,12 +217,12 @@ def test_compiled_lean_verdict_defers_the_eigenvalues_and_gives_the_eager_ones(m
     monkeypatch.setenv("VJM_PIN_JIT", "1")
     make, direction, top, steps = CASES["model-c"]
     vm = make()
-    lean = _sequence(vm, direction, top, steps)
+    lean = warm_sequence(vm, direction, top, steps)
     deferred = [r for r in lean if type(r.stability) is SpectrumLater]
     assert len(deferred) >= steps // 2  # the deferral did run
     assert all(r.stability._spectrum is None for r in deferred)  # nothing read yet
     _general(monkeypatch)
-    general = _sequence(vm, direction, top, steps)
+    general = warm_sequence(vm, direction, top, steps)
     for a, b in zip(lean, general):
         assert a.stable == b.stable and a.stability.null_dim == b.stability.null_dim
         assert a.stability.tolerance == b.stability.tolerance
@@ -294,11 +275,11 @@ def test_lean_results_keep_their_numbers_after_later_solves_and_writes(jit, monk
     monkeypatch.setenv("VJM_PIN_JIT", jit)
     make, direction, top, steps = CASES["model-c"]
     vm = make()
-    lean = _sequence(vm, direction, top, steps)
+    lean = warm_sequence(vm, direction, top, steps)
     for r in lean:
         r.x[:] = np.nan  # (a caller writing into a result's array)
     _general(monkeypatch)
-    general = _sequence(vm, direction, top, steps)
+    general = warm_sequence(vm, direction, top, steps)
     for a, b in zip(lean, general):
         for name in ("q", "theta", "wrench", "deflection", "position", "rotation"):
             np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
