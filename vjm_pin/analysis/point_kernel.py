@@ -58,7 +58,7 @@ import numpy as np
 
 from vjm_pin.kinematics.chain import FLUSH_BELOW
 from vjm_pin.solver.chain_kernel import _rate_lin, _rate_terms, _twist_rate_row, _twists
-from vjm_pin.solver.kernel import _back_substitute, _qr_t, _reflect_rows
+from vjm_pin.solver.kernel import _back_substitute, _q_vector, _qr_t, _reflect_rows
 from vjm_pin.solver.lapack import lapack as _lapack
 from vjm_pin.solver.stability import SCIPY_LAPACK_MAX_N
 from vjm_pin.solver.stiffness import SINGULAR_RCOND, _inverse_if_regular, eq28_matrix
@@ -718,23 +718,6 @@ def _householder_r(hh, m):
     return rmat
 
 
-def _q_vector(hh, v, m, n, transposed):
-    """``Qᵀ v`` (``transposed``) or ``Q v`` in place, ``Q = H_0 ⋯ H_{m−1}`` from the reflectors ``hh``
-    (``H_k = I − τ_k v_k v_kᵀ``, ``v_k[k] = 1``, ``v_k[i] = hh[k, i]`` for ``i > k``, ``τ_k = hh[m, k]``)."""
-    for kk in range(m):
-        k = kk if transposed else m - 1 - kk
-        t = hh[m, k]
-        if t == 0.0:
-            continue
-        s = v[k]
-        for i in range(k + 1, n):
-            s += hh[k, i] * v[i]
-        s *= t
-        v[k] -= s
-        for i in range(k + 1, n):
-            v[i] -= s * hh[k, i]
-
-
 def _q_both_sides(hh, a, m, n):
     """``a ← Qᵀ a Q`` in place for an (n, n) ``a`` (the reflectors of :func:`_q_vector`): the rows
     by :func:`vjm_pin.solver.kernel._reflect_rows` (``Qᵀ a``), then every row ``r`` from the right
@@ -882,11 +865,11 @@ _fused = None  # the compiled (_predict_loops, _fused_point_loops, _scaled_diff)
 _compiled = None  # the compiled _point_loops once loaded, False when numba is unavailable
 _reuse = None  # the compiled _reuse_point_loops once loaded (compiled())
 #: This module's njit helpers, compiled (before the kernels that call them) by compiled().
-_OWN_HELPERS = ("_top_eigpair", "_eq28_tangent", "_reduced", "_rate_value", "_householder_r", "_q_vector",
+_OWN_HELPERS = ("_top_eigpair", "_eq28_tangent", "_reduced", "_rate_value", "_householder_r",
                 "_q_both_sides", "_margin_tail")
 #: The dense kernel's helpers (:mod:`vjm_pin.solver.kernel`) this module calls, compiled there once
 #: (numba's on-disk cache of this module does not see edits of kernel.py: clear ``__pycache__`` then).
-_KERNEL_HELPERS = ("_qr_t", "_reflect_rows")
+_KERNEL_HELPERS = ("_q_vector", "_qr_t", "_reflect_rows")
 
 
 def _jit_mode() -> str:

@@ -831,18 +831,6 @@ class EquilibriumSolver:
             ctx[4], ctx[5] = fn, ((lean,) + consts[2:] if lean is not None else None)
             ctx[6] = kernel.workspace(consts[0], self.kin.model.nq) if lean is not None else None
         self._fast_its = 0
-        plan = ctx[10] if len(ctx) > 10 else None
-        if plan is not None and plan[1] is ctx[4] and plan[0] is self.kin and flushed:
-            # the looped path set up for this step function (_fused_looped's plan): _fused_iterations'
-            # preamble for it, inline (the same arguments; x used as it is, see there)
-            pt = np.asarray(p_t, float)
-            rt = np.asarray(r_t, float)
-            ctx[2][9:12] = pt  # kernel.with_target
-            if not (type(x) is np.ndarray and x.dtype == np.float64 and x.ndim == 1 and x.flags.c_contiguous
-                    and x.flags.writeable):
-                x = np.array(x, dtype=float)
-            return self._fused_looped(ctx, ctx[8], x, p_t, r_t, pt, rt, self._ir.size > 0,
-                                      bool(_chain._flush_enabled), 0, False)
         return self._fused_iterations(ctx, p_t, r_t, x, flushed)
 
     def _fused_iterations(self, ctx, p_t, r_t, x, flushed: bool = False, relaxed: int = 0, eager: bool = False):

@@ -529,20 +529,27 @@ def _reflect_rows(hh, a, m, n):
                 a[i, c] -= s[c] * v
 
 
-def _apply_qt(hh, v, m, n):
-    """``Qᵀ v = H_{m−1} … H_0 v`` from the reflectors ``hh`` (see :func:`_iterate_loops`)."""
-    out = v.copy()
-    for k in range(m):
+def _q_vector(hh, v, m, n, transposed):
+    """``Qᵀ v`` (``transposed``) or ``Q v`` in place, ``Q = H_0 ⋯ H_{m−1}`` from the reflectors ``hh``
+    (``H_k = I − τ_k v_k v_kᵀ``, ``v_k[k] = 1``, ``v_k[i] = hh[k, i]`` for ``i > k``, ``τ_k = hh[m, k]``)."""
+    for kk in range(m):
+        k = kk if transposed else m - 1 - kk
         t = hh[m, k]
         if t == 0.0:
             continue
-        s = out[k]
+        s = v[k]
         for i in range(k + 1, n):
-            s += hh[k, i] * out[i]
+            s += hh[k, i] * v[i]
         s *= t
-        out[k] -= s
+        v[k] -= s
         for i in range(k + 1, n):
-            out[i] -= s * hh[k, i]
+            v[i] -= s * hh[k, i]
+
+
+def _apply_qt(hh, v, m, n):
+    """``Qᵀ v = H_{m−1} … H_0 v`` from the reflectors ``hh`` (see :func:`_iterate_loops`), a new array."""
+    out = v.copy()
+    _q_vector(hh, out, m, n, True)
     return out
 
 
@@ -1028,7 +1035,7 @@ def restorer():
 
 #: The njit helpers of :func:`_iterate_loops`, compiled (in this order) by :func:`_load_compiled`;
 #: the chain kernel (:mod:`vjm_pin.solver.chain_kernel`) calls the same ones (not ``_iterate_body``).
-_HELPERS = ("_apply_qt", "_qr_t", "_back_substitute", "_multiplier", "_hessian", "_progress", "_full_rank", "_reflect_rows",
+_HELPERS = ("_q_vector", "_apply_qt", "_qr_t", "_back_substitute", "_multiplier", "_hessian", "_progress", "_full_rank", "_reflect_rows",
             "_lu_eliminate", "_step_loops", "_moved_loops", "_iterate_body")
 _lean = None  # the compiled _iterate_into once built, False when numba is unavailable
 
