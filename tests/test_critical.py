@@ -640,13 +640,9 @@ def test_chain_path_gives_the_dense_path_result(jit_on, posture, d):
     np.testing.assert_allclose(ref.stability.eigenvalues, ev, rtol=1e-9, atol=1e-12 * abs(ev).max())
 
 
-@pytest.mark.parametrize("broken", ["pencil", "uncertified"])
-def test_linearised_chain_newton_when_the_pencil_gives_way(jit_on, broken):
-    """Where the pencil's power iteration gives no certified root (no quotient, or a Sturm count
-    that is not reliable) the linearised estimate comes from Newton on the certified smallest
-    eigenvalue: the same value as the dense generalized eigenproblem."""
-    from vjm_pin.solver import chain_eigen
-
+def _k4_start_and_dense_estimate(jit_on):
+    """The k = 4 column's chain setup, its unloaded start point, and the linearised critical load
+    of the dense path (``VJM_PIN_JIT=0``) for reference: ``(critical module, tracer, start, estimate)``."""
     vm = _long_column(4)
     crit, sol, tr = _chain_setup(vm)
     p0 = crit._start(vm, tr, sol, tr.d)
@@ -654,6 +650,17 @@ def test_linearised_chain_newton_when_the_pencil_gives_way(jit_on, broken):
         mp.setenv("VJM_PIN_JIT", "0")
         tr0 = crit._Tracer(vm, tr.d, sol.length_scale, EquilibriumSolver(vm), 1e-4)
         dense = crit.linearised_load(tr0, crit._start(vm, tr0, tr0.solver, tr0.d))
+    return crit, tr, p0, dense
+
+
+@pytest.mark.parametrize("broken", ["pencil", "uncertified"])
+def test_linearised_chain_newton_when_the_pencil_gives_way(jit_on, broken):
+    """Where the pencil's power iteration gives no certified root (no quotient, or a Sturm count
+    that is not reliable) the linearised estimate comes from Newton on the certified smallest
+    eigenvalue: the same value as the dense generalized eigenproblem."""
+    from vjm_pin.solver import chain_eigen
+
+    crit, tr, p0, dense = _k4_start_and_dense_estimate(jit_on)
     orig = chain_eigen.HeldEigen.pencil
     if broken == "pencil":
         jit_on.setattr(chain_eigen.HeldEigen, "pencil", lambda self, *a, **k: None)
@@ -741,13 +748,7 @@ def test_pencil_rayleigh_ritz_from_a_generic_start(jit_on):
     quotient (the Ritz vector of a space that holds the start); one more step is no worse."""
     from vjm_pin.solver.chain_eigen import held_eigen
 
-    vm = _long_column(4)
-    crit, sol, tr = _chain_setup(vm)
-    p0 = crit._start(vm, tr, sol, tr.d)
-    with jit_on.context() as mp:
-        mp.setenv("VJM_PIN_JIT", "0")
-        tr0 = crit._Tracer(vm, tr.d, sol.length_scale, EquilibriumSolver(vm), 1e-4)
-        dense = crit.linearised_load(tr0, crit._start(vm, tr0, tr0.solver, tr0.d))
+    crit, tr, p0, dense = _k4_start_and_dense_estimate(jit_on)
     he = held_eigen(tr.kernel, tr.mask, tr.kin.evaluate(p0.eq.x, hessian=False).jacobian, tr.P)
     w0, w1 = p0.eq.wrench, p0.tan[1] / p0.k
     start = np.cos(0.37 * np.arange(he.n)) + 0.1
