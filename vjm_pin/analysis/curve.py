@@ -98,7 +98,8 @@ from vjm_pin.kinematics.chain import flush_tiny
 from vjm_pin.kinematics.dead_loads import Load
 from vjm_pin.model.format import VjmModel
 from vjm_pin.model.task import task_vector
-from vjm_pin.solver.equilibrium import EquilibriumResult, EquilibriumSolver, _built
+from vjm_pin.solver.equilibrium import FRESH as _FRESH
+from vjm_pin.solver.equilibrium import EquilibriumResult, EquilibriumSolver
 from vjm_pin.solver.mechanism import MechanismSolver
 from vjm_pin.solver.stability import (
     RANK_TOL,
@@ -134,6 +135,7 @@ MIN_STEP = 1e-10
 DIP_DEPTH = 12
 #: :meth:`_Tracer._fused_step`'s answer "the local iteration gave way: go on as the general path".
 _GENERAL = object()
+_new_object = object.__new__
 
 #: Private switch (False: every point by the generic eq. 30 inverse and the SVD null space of
 #: check_stability_held, as released; for the side-by-side benchmark and the tests).
@@ -458,10 +460,16 @@ class _LateBP(_BP):
         return self._lv is None and st.stable and st.tolerance >= thr  # every eigenvalue < −tolerance ≤ −thr
 
     def below(self, thr: float) -> bool:
-        return True if self._certified(thr) else self.lam < -thr
+        st = self._stab  # (_certified(thr), inline)
+        if self._lv is None and st.stable and st.tolerance >= thr:
+            return True
+        return self.lam < -thr
 
     def above(self, thr: float) -> bool:
-        return False if self._certified(thr) else self.lam >= -thr
+        st = self._stab  # (_certified(thr), inline)
+        if self._lv is None and st.stable and st.tolerance >= thr:
+            return False
+        return self.lam >= -thr
 
 
 class _StateBlocks:
@@ -547,7 +555,10 @@ class _Tracer:
         self._pargs = None  # the compiled point kernel's constant arguments (_fused_step)
         self._reuse = None  # the fused step's point on the corrector's QR (_reuse_setup; None: not decided yet)
         self._rargs = self._hh_shape = None  # its constant arguments, the reflectors' shape (_reuse_setup)
-        self._rt = None  # (rotation part of the last target or None for a translation, its target rotation) (_fused_step)
+        self._rt = None  # (rotation part of the last target or None for a translation, its target rotation, both
+        # target arrays float64 and C-contiguous) (_fused_step)
+        self._p0l = None  # (p0, p0's and d[:3]'s entries as floats) (_fused_step)
+        self._hz_shape = (self.kernel.n, self.kernel.n) if self.kernel is not None else None  # H(F)'s shape, (n, n)
         self._d_lin, self._d_rot = d[:3].copy(), d[3:].copy()  # (s·d[:3] is (s·d)[:3], element by element)
         self._d_translation = not self._d_rot.any()
         self._dense_point = False  # the compiled dense point kernel applies (PointKernel.point's dispatch)
@@ -671,7 +682,8 @@ class _Tracer:
             dw = None  # ds·t[1] (+ the second-order term), when the general solve needs it
             h = a.hist if second_order else None
             fz = self._fz
-            if h is None and fz is not None:  # x_pred and its scaled move in one compiled call
+            fresh = h is None and fz is not None
+            if fresh:  # x_pred and its scaled move in one compiled call (x_pred: a fresh float64 (nq,) array)
                 x_pred = np.empty(self._nq)
                 move = fz[0](a.eq.x, t[0], ds, self.free, self.var_scale, _chain._flush_enabled, x_pred)
             else:
@@ -693,7 +705,7 @@ class _Tracer:
             x_pred, w_pred = a.eq.x.copy(), a.eq.wrench.copy()
             move = 0.0
         if t is not None and self._corr is not None:
-            got = self._fused_step(a, s, x_pred, move, t)
+            got = self._fused_step(a, s, x_pred, move, t, fresh)
             if got is not _GENERAL:
                 return got
             eq = None  # the local iteration gave way: as _solve_local returning None
@@ -740,7 +752,7 @@ class _Tracer:
             self._fz = _pk.fused()
         return fn
 
-    def _fused_step(self, a: _BP, s: float, x_pred, move: float, t):
+    def _fused_step(self, a: _BP, s: float, x_pred, move: float, t, fresh: bool = False):
         """:meth:`step`'s corrector and point in one lean pass (the common step of a curve): the
         solver's fused local iteration from the prediction (``EquilibriumSolver._corrector``, the
         iterations of ``_solve_local``), the continuity check, then the point kernel on the
@@ -755,17 +767,30 @@ class _Tracer:
         an explicit ``Q`` instead, :func:`~vjm_pin.analysis.point_kernel._fused_point_loops` factors ``J``
         again: the same numbers to rounding). Where the compiled corrector
         certified "stable" without the eigenvalues of eq. (23) the point is a :class:`_LateBP`: ``λ``
-        computed when first read (the tracer's verdicts ask the certificate first)."""
+        computed when first read (the tracer's verdicts ask the certificate first). ``fresh``:
+        ``x_pred`` is a fresh float64 (nq,) array (the compiled prediction's): with a target whose
+        arrays are float64 and C-contiguous the corrector goes straight to its one-call loop, which
+        reads them as they are (``EquilibriumSolver._corrector`` with ``flushed`` ``FRESH``)."""
         solver = self.cont
         rt = self._rt
         if rt is not None and (rt[0] is None or rt[0] == (s * self._d_rot).tobytes()):
             # displace(p0, r0, s·d) with its rotation kept (fixed when d is a translation): the same numbers
-            p_t, r_t = solver.p0 + s * self._d_lin, rt[1]
+            # (p0 + s·d[:3] element by element in Python floats: IEEE products and sums, as numpy's)
+            pl = self._p0l
+            if pl is None or pl[0] is not solver.p0:
+                pl = self._p0l = (solver.p0,) + tuple(solver.p0.tolist()) + tuple(self._d_lin.tolist())
+            p_t, r_t = np.array((pl[1] + s * pl[4], pl[2] + s * pl[5], pl[3] + s * pl[6])), rt[1]
+            fresh = fresh and rt[2]
         else:
             target = s * self.d
             p_t, r_t = _displace(solver.p0, solver.r0, target)
-            self._rt = (None if self._d_translation else target[3:].tobytes(), r_t)
-        raw = solver._corrector(self._corr, p_t, r_t, x_pred, flushed=True)  # (step flushed x_pred)
+            ok = (type(r_t) is np.ndarray and r_t.dtype == np.float64 and r_t.shape == (3, 3)
+                  and r_t.flags.c_contiguous and type(p_t) is np.ndarray and p_t.dtype == np.float64
+                  and p_t.shape == (3,))
+            self._rt = (None if self._d_translation else target[3:].tobytes(), r_t, ok)
+            fresh = fresh and ok
+        # (step flushed x_pred; fresh: the straight route to the compiled loop)
+        raw = solver._corrector(self._corr, p_t, r_t, x_pred, flushed=_FRESH if fresh else True)
         if raw is None:
             return _GENERAL
         fz = self._fz
@@ -773,7 +798,7 @@ class _Tracer:
             self._point_fn()  # (the compiled point kernel when wanted: also for point() below)
             fz = self._fz
         kf = raw[4]
-        if fz is None or kf[6].shape != (self.kernel.n, self.kernel.n):
+        if fz is None or kf[6].shape != self._hz_shape:
             corr = self.scaled(raw[0] - x_pred)
             if not corr <= CORRECTOR_RATIO * move + 1e-9:
                 return None
@@ -785,13 +810,15 @@ class _Tracer:
             self._reuse_setup()
         if self._reuse and kf[1].shape == self._hh_shape:  # the point on the corrector's own QR
             pa = self._rargs
-            out = np.empty(self._nq + 6)
+            nq = self._nq
+            out = np.empty(nq + 6)
             try:
                 st, k, mu, rate, force = pa[0](raw[0], x_pred, CORRECTOR_RATIO * move + 1e-9, raw[3].jacobian, kf[1],
                                                kf[6], kf[7], pa[1], pa[2], pa[3], pa[4], out)
             except np.linalg.LinAlgError:  # an exactly singular matrix (numba's np.linalg raises): after the check
                 st = 1
-            tan = (out[:self._nq], out[self._nq:]) if not st else None
+            if not st:
+                tan = (out[:nq], out[nq:])
         else:
             pa = self._pargs
             if pa is None:
@@ -820,13 +847,18 @@ class _Tracer:
             if force is None:
                 force = self.d @ eq.wrench
             if ev is None:  # "stable" certified, the eigenvalues when first read (_LateBP)
-                p = _LateBP(s, eq, force, k, mu, raw[7])
+                # _LateBP(s, eq, force, k, mu, raw[7]) with its dμ/ds and tangent, slot by slot
+                p = _new_object(_LateBP)
+                p._stab, p._lv = raw[7], None
+                p.s, p.eq, p.force, p.k, p.st, p.mu = float(s), eq, float(force), k, None, mu
+                p.dmu = rate if self.mask is not None and _analytic_rate else None
+                p.tan, p.hist = tan, None
             else:
                 lam = float(ev[-1]) if ev.size else -np.inf  # (ascending: _max_eig)
                 p = _BP(s, eq, force, k, None, mu, lam)
-            if self.mask is not None and _analytic_rate:
-                p.dmu = rate
-            p.tan = tan
+                if self.mask is not None and _analytic_rate:
+                    p.dmu = rate
+                p.tan = tan
         if self.second_order:
             p.hist = (a.s, t[0], t[1])
         return p
@@ -959,13 +991,17 @@ class _Tracer:
         # max(f₀, f₁) + M/2 < −2·tiny (M/8 and tiny to spare for the rounding of the extremum's value,
         # ~1e-14·(|f| + M); the same for two non-negative ends): the answer of the extremum below (None)
         # without computing it.
-        tiny = 1e-12 * max(abs(f0), abs(f1), self.thr)
+        # (the builtins max and min written out, their rule: max(a, b) is b if b > a else a)
+        a0, a1, thr = abs(f0), abs(f1), self.thr
+        tiny = a1 if a1 > a0 else a0
+        tiny = 1e-12 * (thr if thr > tiny else tiny)
         dl = f1 - f0
-        bound = 0.5 * max(abs(h * g0 - dl), abs(h * g1 - dl))
+        a0, a1 = abs(h * g0 - dl), abs(h * g1 - dl)
+        bound = 0.5 * (a1 if a1 > a0 else a0)
         if both_neg:
-            if max(f0, f1) + bound < -2.0 * tiny and not g0 > 0 >= g1:
+            if (f1 if f1 > f0 else f0) + bound < -2.0 * tiny and not g0 > 0 >= g1:
                 return None
-        elif min(f0, f1) - bound > 2.0 * tiny:
+        elif (f1 if f1 < f0 else f0) - bound > 2.0 * tiny:
             return None
         ext = _hermite_extremum(p.s, f0, g0, q.s, f1, g1, maximum=both_neg)
         if ext is None:
@@ -1065,11 +1101,15 @@ class _Tracer:
     def process(self, p: _BP, q: _BP, index: int, critical: list) -> _BP:
         """Events over the accepted sub-step ``[p, q]``; returns the followed point that
         ends it (``q``, or the point of the branch switched to)."""
+        ev = self.first_event(p, q)
+        if ev is None:  # (the common answer, before the loop)
+            return q
         a = p
-        for _ in range(64):  # events within one sub-step: a handful at most
-            ev = self.first_event(a, q)
-            if ev is None:
-                return q
+        for i in range(64):  # events within one sub-step: a handful at most
+            if i:
+                ev = self.first_event(a, q)
+                if ev is None:
+                    return q
             kind, lo, hi = ev
             if kind == "cross":
                 c, lo0, hi0, n = self.locate_cross(lo, hi)
@@ -1105,7 +1145,9 @@ class _Tracer:
                     self.seg_margin = 0.0
                     h = self.range
                 continue
-            self.seg_margin = max(self.seg_margin, -cur.mu)
+            m = -cur.mu
+            if m > self.seg_margin:  # (max(self.seg_margin, -cur.mu))
+                self.seg_margin = m
             new = self.process(cur, nxt, index, critical)
             if new is not nxt:  # switched branch at a bifurcation
                 cur = new if new is not None else nxt
@@ -1194,7 +1236,9 @@ def _curve_point(p: _BP, thr: float) -> CurvePoint:
     held = bool(p.below(thr))
     w = p.eq.wrench
     # CurvePoint(...) without its field-by-field frozen __init__ (one per point): every field, in order
-    return _built(CurvePoint, {
+    # (_built(CurvePoint, ...), inline)
+    obj = _new_object(CurvePoint)
+    obj.__dict__.update({
         "deflection": float(p.s),
         "force": float(p.force),
         "wrench": w.copy() if type(w) is np.ndarray and w.dtype == np.float64 else np.asarray(w, float).copy(),
@@ -1204,6 +1248,7 @@ def _curve_point(p: _BP, thr: float) -> CurvePoint:
         "stable_end_held": held,
         "force_control_margin": float(-p.mu),
     })
+    return obj
 
 
 def _trace_branch(vm, d, start_eq: EquilibriumResult, s_values, kin, solver) -> list[CurvePoint]:

@@ -110,7 +110,7 @@ def evaluate_blocks(
     last = getattr(kin, "_blocks_last", None)
     if last is not None and last[0] is vm and last[1] == key:
         b = last[2]
-        if type(b) is _Lazy:  # kept lazily (remember_lazy): built now, once
+        if type(b) is _Lazy or type(b) is LazyBlocks:  # kept lazily (remember_lazy): built now, once
             b = b.build()
             kin._blocks_last = (vm, key, b)
         return b
@@ -171,3 +171,17 @@ class _Lazy:
 
     def __init__(self, build):
         self.build = build
+
+
+class LazyBlocks(tuple):
+    """Blocks not built yet, as their sources ``(J, H, nθ, K_θ, state)``: ``J`` (m, n) the task rows
+    and free columns of the frame Jacobian, ``H`` (n, n) the Hessian of Ψ (eq. 16), both in (θ, q)
+    order, arrays no one writes. Kept by ``kin._blocks_last = (vm, key, LazyBlocks((...)))``, as
+    :func:`remember_lazy` keeps a builder (a solver's warm step builds one per point: no closure, no
+    ``__init__``); :meth:`build` lays them out as :func:`evaluate_blocks` does, views of ``J`` and ``H``."""
+
+    __slots__ = ()
+
+    def build(self) -> Blocks:
+        jac, hz, nt, kt, st = self
+        return Blocks(jac[:, :nt], jac[:, nt:], hz[:nt, :nt], hz[:nt, nt:], hz[nt:, :nt], hz[nt:, nt:], kt, st)

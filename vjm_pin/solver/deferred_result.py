@@ -64,7 +64,9 @@ class DeferredResult(EquilibriumResult):
     energy = _Field("energy")
 
     def _derive(self, name: str):
-        x, pos, rot, p0, r0, theta_idx, theta0, q_idx, k_theta = self.__dict__["_src"]
+        x, state, consts = self.__dict__["_src"]
+        p0, r0, theta_idx, theta0, q_idx, k_theta = consts
+        pos, rot = state.position, state.rotation
         if name == "q":
             return x[q_idx]
         if name == "theta":
@@ -96,9 +98,11 @@ class DeferredResult(EquilibriumResult):
 
 def deferred_result(fields: dict, src: tuple) -> DeferredResult:
     """The :class:`DeferredResult` with the eager ``fields`` (every field of ``EquilibriumResult``
-    but :data:`DEFERRED`) and the sources of the others, ``src`` = ``(x, position, rotation, p0, r0,
-    theta_idx, theta0, q_idx, K_theta)``: the converged configuration and end placement (arrays no
-    one else writes) and the solver's and model's constants."""
+    but :data:`DEFERRED`) and the sources of the others, ``src`` = ``(x, state, (p0, r0, theta_idx,
+    theta0, q_idx, K_theta))``: the converged configuration and its
+    :class:`~vjm_pin.kinematics.chain.KinematicState` (the end placement: arrays no one else writes)
+    and the solver's and model's constants. (:meth:`~vjm_pin.solver.equilibrium.EquilibriumSolver._corrector_result`
+    builds the same object inline.)"""
     obj = object.__new__(DeferredResult)
     d = obj.__dict__
     d.update(fields)

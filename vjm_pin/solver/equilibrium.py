@@ -118,6 +118,7 @@ from vjm_pin.model.task import task_vector
 from vjm_pin.solver import kernel as _kernel  # numpy only at import; numba when first needed
 from vjm_pin.solver.blocks import (
     Blocks,
+    LazyBlocks,
     evaluate_blocks,
     full_wrench,
     remember_blocks,
@@ -198,17 +199,20 @@ _compiled_kinematics = True
 _KERNEL_DUMMY = (np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 0)), np.zeros(0), np.zeros(0), np.zeros(0),
                  np.zeros((0, 0)), np.zeros(0), np.zeros((6, 0)))
 _NO_KEY = np.frombuffer(b"")  # no kept equilibrium (a read-only empty configuration; _fused_looped)
-_deferred_result = None  # vjm_pin.solver.deferred_result.deferred_result once imported (_load_deferred)
+_new_object = object.__new__
+#: ``EquilibriumSolver._corrector``'s ``flushed`` for a flushed and fresh start (see there).
+FRESH = 2
+_deferred_result = None  # vjm_pin.solver.deferred_result.DeferredResult once imported (_load_deferred)
 
 
 def _load_deferred():
-    """:func:`vjm_pin.solver.deferred_result.deferred_result` (that module imports this one: bound
+    """:class:`vjm_pin.solver.deferred_result.DeferredResult` (that module imports this one: bound
     when first needed, not at every result)."""
     global _deferred_result
-    from vjm_pin.solver.deferred_result import deferred_result
+    from vjm_pin.solver.deferred_result import DeferredResult
 
-    _deferred_result = deferred_result
-    return deferred_result
+    _deferred_result = DeferredResult
+    return DeferredResult
 
 
 class _Placement:
@@ -811,7 +815,7 @@ class EquilibriumSolver:
         # the eigenvalues (_fused_iterations; the tracer reads them when it needs them)]
         return [_kernel.mode(), consts, cf, thr, None, None, None, _corrector_defer]
 
-    def _corrector(self, ctx, p_t, r_t, x, flushed: bool = False):
+    def _corrector(self, ctx, p_t, r_t, x, flushed: bool | int = False):
         """:meth:`_fast_newton_fused` from ``x`` (a predicted point of a curve) towards the target
         ``(p_t, r_t)`` for :meth:`~vjm_pin.analysis.curve._Tracer.step`: the same iterations, tests,
         caches and numbers (:meth:`_fused_iterations`), with the per-solve set-up done once per curve
@@ -821,17 +825,121 @@ class EquilibriumSolver:
         Returns None when the plain local iteration gives way (``_fast_its`` set, as
         :meth:`_fast_newton`), else the raw equilibrium of :meth:`_fused_iterations` (build the
         result with :meth:`_corrector_result`). ``flushed``: ``x`` has no entry below 1e-150
-        already (:func:`flush_tiny` would not change it)."""
+        already (:func:`flush_tiny` would not change it). ``flushed`` :data:`FRESH` (2): flushed,
+        and fresh: ``x`` is a C-contiguous writable float64 (nq,) array of the caller's, ``p_t`` a
+        float64 (3,) array and ``r_t`` a C-contiguous float64 (3, 3) array (what
+        :meth:`_fused_iterations` would make of them): once the context's one-call compiled loop is
+        set up (:meth:`_fused_looped`, the common case) the iteration goes straight to it
+        (:meth:`_corrector_looped`), its per-call checks made once per context (``_corrector_route``)."""
         kernel = _kernel
-        md, consts, step_fn = ctx[0], ctx[1], ctx[4]
-        fn = kernel.get(md)
+        c = kernel._compiled
+        # kernel.get(mode): the loaded compiled kernel in modes "1" and "auto" (get's own answer, without its calls)
+        fn = c if c and ctx[0] != "0" else kernel.get(ctx[0])
+        if flushed is FRESH:
+            route = ctx[11] if len(ctx) > 11 else None
+            if (route is None or route[0] is not fn or ctx[4] is not fn or ctx[10] is not route[1]
+                    or route[2] is not self.kin or route[3] != self._fast_max_iter):
+                route = self._corrector_route(ctx, fn)
+            if route is not None:
+                self._fast_its = 0
+                return self._corrector_looped(ctx, route, p_t, r_t, x)
+        consts, step_fn = ctx[1], ctx[4]
         if fn is not step_fn:  # first call, or auto mode switched to the compiled kernel
             small = getattr(fn, "dispatcher", None) is not None and int(consts[0][0]) < _chain_kernel_min_n()
             lean = kernel.lean() if small else None
             ctx[4], ctx[5] = fn, ((lean,) + consts[2:] if lean is not None else None)
             ctx[6] = kernel.workspace(consts[0], self.kin.model.nq) if lean is not None else None
         self._fast_its = 0
-        return self._fused_iterations(ctx, p_t, r_t, x, flushed)
+        return self._fused_iterations(ctx, p_t, r_t, x, bool(flushed))
+
+    def _corrector_route(self, ctx, fn):
+        """The per-context constants of :meth:`_corrector_looped` (kept as ``ctx``'s twelfth item), or
+        None while :meth:`_fused_iterations` would not take the one-call compiled loop with the plan
+        kept in ``ctx`` (:meth:`_fused_looped`; not set up yet, or another path): ``(step function,
+        plan, kinematics, max_iter, loop limits, whole-iteration call, rot, defer, kept verdict's
+        fields, its eigenvalue function)``. Valid while the step function, the plan, the kinematics
+        and ``_fast_max_iter`` stay the same (:meth:`_corrector` checks them)."""
+        if (len(ctx) < 11 or ctx[4] is not fn or getattr(fn, "dispatcher", None) is None or ctx[5] is None
+                or not ctx[8] or ctx[8][0] is None):
+            return None
+        plan = ctx[10]
+        if plan is None or plan[0] is not self.kin or plan[1] is not fn:
+            return None
+        lim = np.array([self._fast_max_iter, POLISH_ITERATIONS, 0], np.int64)  # (_loop_limits(0))
+        spectrum = _kernel.spectrum
+        route = (fn, plan, self.kin, self._fast_max_iter, lim, ctx[8], self._ir.size > 0, bool(ctx[7]),
+                 SpectrumLater.stable_fields(plan[11], plan[10], spectrum), spectrum)
+        if len(ctx) > 11:
+            ctx[11] = route
+        else:
+            ctx.append(route)
+        return route
+
+    def _corrector_looped(self, ctx, route, p_t, r_t, x):
+        """:meth:`_fused_iterations` then :meth:`_fused_looped` for :meth:`_corrector` with :data:`FRESH`
+        inputs and the ``route`` of :meth:`_corrector_route` (``relaxed`` 0, not ``eager``): the plain
+        local Newton iteration of eq. (5) in the same compiled call with the same arguments, the same
+        caches (``_fast_fact``, ``_fast_cache``, ``_fast_cond``, ``kin._last``, the kept Blocks of eq.
+        16) and the same raw result with its eq. (23) verdict, their objects built without the general
+        path's per-call checks (the kept Blocks as :class:`~vjm_pin.solver.blocks.LazyBlocks`, a
+        certified verdict from the template of :meth:`SpectrumLater.stable_fields`)."""
+        step_fn, plan, kin, _, lim, ck, rot, defer, later, spectrum = route
+        _, _, kbuf, ci, cf, kz, mask, theta0, vscale, escale, thr, d, nt, kt, pool = plan
+        cf[9:12] = p_t  # kernel.with_target
+        xout, ws = ctx[6]
+        fact = self._fast_fact
+        if fact is not None and fact[1] is kin and fact[-1] is step_fn:
+            kst = fact[2]
+            code, it, counted, _, ep, er, rs, reused = ck[0](
+                x, np.frombuffer(fact[0]), True, fact[3:11], kst.position, kst.rotation, ck[3], ck[4], r_t, rot,
+                bool(_chain._flush_enabled), ci, cf, kz, mask, theta0, vscale, escale, xout, ws, kbuf, thr, defer,
+                lim)
+        else:  # (kx read only, as np.frombuffer's: one compiled signature)
+            dummy = _KERNEL_DUMMY
+            code, it, counted, _, ep, er, rs, reused = ck[0](
+                x, _NO_KEY, False, dummy[:8], dummy[3], dummy[0], ck[3], ck[4], r_t, rot,
+                bool(_chain._flush_enabled), ci, cf, kz, mask, theta0, vscale, escale, xout, ws, kbuf, thr, defer,
+                lim)
+        if counted >= 0:
+            self._fast_its = counted
+        if code != _kernel.DONE:
+            return None
+        x = xout.copy()
+        key = x.tobytes()
+        kf = ws[:8]
+        info = ws[10]
+        jac, qf, rr, f, r, tau, hz, f6 = kf
+        if info[0] != 0.0:  # stable, certified: the eigenvalues when first read
+            ctx[6] = (xout, _kernel.workspace_after(ws, True, pool))
+            ev = None
+            stab = _new_object(SpectrumLater)  # SpectrumLater.stable_now(d, thr, ws[9], spectrum)
+            sd = stab.__dict__
+            sd.update(later)
+            sd["_matrix"] = ws[9]
+        else:
+            ctx[6] = (xout, _kernel.workspace_after(ws, False, pool))
+            ev = ws[8]
+            stab = None
+        if reused:
+            st = fact[2]
+        else:
+            st = _new_object(KinematicState)  # _built(KinematicState, ...)
+            st.__dict__.update({"position": kbuf[1].copy(), "rotation": kbuf[2].copy(),
+                                "jacobian": kbuf[0].copy(), "hessian": None})
+            kin._last = (key, st)  # kin.evaluate(x, hessian=False) at this point: no Pinocchio call
+        if stab is None:
+            stable = bool(ev.size == 0 or ev[-1] < -thr)  # (ascending)
+            stab = self._kernel_stability(stable, ev, d, thr, jac, hz, st)
+        res = {"position": float(ep), "orientation": float(er), "statics": float(rs)}
+        wkey = key + f6.tobytes()
+        self._fast_cache = (wkey + p_t.tobytes() + r_t.tobytes(), res, stab, x, f, f6, p_t, r_t)
+        self._fast_fact = (key, kin, st, jac, qf, rr, f, r, tau, hz, f6, step_fn)
+        self._fast_cond = (key, info[1])
+        try:  # remember_lazy(self.vm, kin, wkey, _blocks_builder(jac, hz, nt, kt, st))
+            kin._blocks_last = (self.vm, wkey, LazyBlocks((jac, hz, nt, kt, st)))
+        except AttributeError:  # a kinematics object with __slots__: no cache
+            pass
+        return x, f, it, st, kf, ev, res, stab
 
     def _fused_iterations(self, ctx, p_t, r_t, x, flushed: bool = False, relaxed: int = 0, eager: bool = False):
         """The fused local iteration of :meth:`_fast_newton_fused` and :meth:`_corrector` from ``x``
@@ -1112,11 +1220,12 @@ class EquilibriumSolver:
         src = self.__dict__.get("_deferred_src")
         if src is None or src[0] is not self.vm or src[1] is not self.task:
             vm = self.vm
-            src = self._deferred_src = (vm, self.task, tuple(self.task), self.p0, self.r0, vm.theta_idx, vm.theta0,
-                                        vm.q_idx, vm.K_theta)
-        build = _deferred_result or _load_deferred()
-        # (the sources: the iteration's own x, which no one writes, the field a copy of its own)
-        return build({
+            src = self._deferred_src = (vm, self.task, tuple(self.task), (self.p0, self.r0, vm.theta_idx, vm.theta0,
+                                                                          vm.q_idx, vm.K_theta))
+        # deferred_result(fields, sources) without its call: the fields, then the sources (the
+        # iteration's own x, which no one writes, the field a copy of its own; the kept state)
+        obj = _new_object(_deferred_result or _load_deferred())
+        obj.__dict__.update({
             "x": x.copy(),
             "wrench": kf[7].copy(),
             "converged": True,
@@ -1128,7 +1237,9 @@ class EquilibriumSolver:
             "stability_end_held": stab,
             "warnings": () if stab.stable else (UNSTABLE_HELD_NOTE,),
             "checks": {},
-        }, (x, st.position, st.rotation) + src[3:])
+            "_src": (x, st, src[3]),
+        })
+        return obj
 
     def _fast_factor(self, x, f6, qfull, big):
         """The quantities of one :meth:`_fast_newton` iteration at ``x``: (state, J (task
