@@ -868,7 +868,7 @@ class EquilibriumSolver:
         lim = np.array([self._fast_max_iter, POLISH_ITERATIONS, 0], np.int64)  # (_loop_limits(0))
         spectrum = _kernel.spectrum
         route = (fn, plan, self.kin, self._fast_max_iter, lim, ctx[8], self._ir.size > 0, bool(ctx[7]),
-                 SpectrumLater.stable_fields(plan[11], plan[10], spectrum), spectrum)
+                 plan[15], spectrum)
         if len(ctx) > 11:
             ctx[11] = route
         else:
@@ -884,31 +884,47 @@ class EquilibriumSolver:
         path's per-call checks (the kept Blocks as :class:`~vjm_pin.solver.blocks.LazyBlocks`, a
         certified verdict from the template of :meth:`SpectrumLater.stable_fields`)."""
         step_fn, plan, kin, _, lim, ck, rot, defer, later, spectrum = route
-        _, _, kbuf, ci, cf, kz, mask, theta0, vscale, escale, thr, d, nt, kt, pool = plan
+        _, _, kbuf, ci, cf, kz, mask, theta0, vscale, escale, thr = plan[:11]
         cf[9:12] = p_t  # kernel.with_target
         xout, ws = ctx[6]
         fact = self._fast_fact
         if fact is not None and fact[1] is kin and fact[-1] is step_fn:
             kst = fact[2]
-            code, it, counted, _, ep, er, rs, reused = ck[0](
+            out = ck[0](
                 x, np.frombuffer(fact[0]), True, fact[3:11], kst.position, kst.rotation, ck[3], ck[4], r_t, rot,
                 bool(_chain._flush_enabled), ci, cf, kz, mask, theta0, vscale, escale, xout, ws, kbuf, thr, defer,
                 lim)
         else:  # (kx read only, as np.frombuffer's: one compiled signature)
             dummy = _KERNEL_DUMMY
-            code, it, counted, _, ep, er, rs, reused = ck[0](
+            out = ck[0](
                 x, _NO_KEY, False, dummy[:8], dummy[3], dummy[0], ck[3], ck[4], r_t, rot,
                 bool(_chain._flush_enabled), ci, cf, kz, mask, theta0, vscale, escale, xout, ws, kbuf, thr, defer,
                 lim)
+        return self._looped_finish(ctx, plan, later, fact, out, p_t, r_t, p_t, r_t)
+
+    def _looped_finish(self, ctx, plan, later, fact, out, pt, rt, p_t, r_t):
+        """After the one-call compiled loop (:func:`vjm_pin.solver.kernel._iterations_into`, its
+        returned tuple ``out``) of :meth:`_fused_looped` and :meth:`_corrector_looped`: None where it
+        gave way (``_fast_its`` set), else the raw equilibrium of :meth:`_fused_iterations` and the
+        same caches (``_fast_fact``, ``_fast_cache``, ``_fast_cond``, ``kin._last``, the kept Blocks
+        of eq. 16 as :class:`~vjm_pin.solver.blocks.LazyBlocks`); a certified stable verdict of eq. (23)
+        from ``later``, the fields of :meth:`SpectrumLater.stable_fields`. ``fact`` is the
+        ``_fast_fact`` the loop was called with, ``(pt, rt)`` the target as arrays (their bytes key
+        ``_fast_cache``), ``(p_t, r_t)`` as the caller gave it (kept: :meth:`_result` tests identity)."""
+        code, it, counted, _, ep, er, rs, reused = out
         if counted >= 0:
             self._fast_its = counted
         if code != _kernel.DONE:
             return None
+        kin, kbuf, d, pool = plan[0], plan[2], plan[11], plan[14]
+        xout, ws = ctx[6]
         x = xout.copy()
         key = x.tobytes()
         kf = ws[:8]
         info = ws[10]
         jac, qf, rr, f, r, tau, hz, f6 = kf
+        # the buffers now belong to the caches: fresh ones (xout, info and an unused eigenvalue buffer
+        # are read here and kept, as kernel.workspace lays them out)
         if info[0] != 0.0:  # stable, certified: the eigenvalues when first read
             ctx[6] = (xout, _kernel.workspace_after(ws, True, pool))
             ev = None
@@ -928,15 +944,16 @@ class EquilibriumSolver:
                                 "jacobian": kbuf[0].copy(), "hessian": None})
             kin._last = (key, st)  # kin.evaluate(x, hessian=False) at this point: no Pinocchio call
         if stab is None:
+            thr = plan[10]
             stable = bool(ev.size == 0 or ev[-1] < -thr)  # (ascending)
             stab = self._kernel_stability(stable, ev, d, thr, jac, hz, st)
         res = {"position": float(ep), "orientation": float(er), "statics": float(rs)}
         wkey = key + f6.tobytes()
-        self._fast_cache = (wkey + p_t.tobytes() + r_t.tobytes(), res, stab, x, f, f6, p_t, r_t)
-        self._fast_fact = (key, kin, st, jac, qf, rr, f, r, tau, hz, f6, step_fn)
+        self._fast_cache = (wkey + pt.tobytes() + rt.tobytes(), res, stab, x, f, f6, p_t, r_t)
+        self._fast_fact = (key, kin, st, jac, qf, rr, f, r, tau, hz, f6, plan[1])
         self._fast_cond = (key, info[1])
         try:  # remember_lazy(self.vm, kin, wkey, _blocks_builder(jac, hz, nt, kt, st))
-            kin._blocks_last = (self.vm, wkey, LazyBlocks((jac, hz, nt, kt, st)))
+            kin._blocks_last = (self.vm, wkey, LazyBlocks((jac, hz, plan[12], plan[13], st)))
         except AttributeError:  # a kinematics object with __slots__: no cache
             pass
         return x, f, it, st, kf, ev, res, stab
@@ -1128,7 +1145,7 @@ class EquilibriumSolver:
         plan = ctx[10] if len(ctx) > 10 else None
         if plan is None or plan[0] is not kin or plan[1] is not ctx[4]:
             plan = self._looped_plan(ctx)
-        _, step_fn, kbuf, ci, cf, kz, mask, theta0, vscale, escale, thr, d, nt, kt, _ = plan
+        _, step_fn, kbuf, ci, cf, kz, mask, theta0, vscale, escale, thr = plan[:11]
         defer = bool(ctx[7]) and not eager
         xout, ws = ctx[6]
         fact = self._fast_fact
@@ -1143,48 +1160,17 @@ class EquilibriumSolver:
             lim = (None, self._loop_limits(relaxed))
         if not rt.flags.c_contiguous:
             rt = np.ascontiguousarray(rt)
-        code, it, counted, _, ep, er, rs, reused = ck[0](
+        out = ck[0](
             x, kx, have, kf, kpos, krot, ck[3], ck[4], rt, rot, flush, ci, cf, kz, mask, theta0, vscale,
             escale, xout, ws, kbuf, thr, defer, lim[1])
-        if counted >= 0:
-            self._fast_its = counted
-        if code != _kernel.DONE:
-            return None
-        x = xout.copy()
-        key = x.tobytes()
-        kf, ev, sym, info = ws[:8], ws[8], ws[9], ws[10]
-        certified = info[0] != 0.0
-        # the buffers now belong to the caches: fresh ones (xout, info and an unused eigenvalue buffer
-        # are read above and kept, as kernel.workspace lays them out)
-        ctx[6] = (xout, _kernel.workspace_after(ws, certified, plan[14]))
-        if certified:  # stable, certified: the eigenvalues when first read
-            ev = None
-            stab = SpectrumLater.stable_now(d, thr, sym, _kernel.spectrum)
-        else:
-            stab = None
-        jac, qf, rr, f, r, tau, hz, f6 = kf
-        if reused:
-            st = fact[2]
-        else:
-            st = _built(KinematicState, {"position": kbuf[1].copy(), "rotation": kbuf[2].copy(),
-                                         "jacobian": kbuf[0].copy(), "hessian": None})
-            kin._last = (key, st)  # kin.evaluate(x, hessian=False) at this point: no Pinocchio call
-        if stab is None:
-            stable = bool(ev.size == 0 or ev[-1] < -thr)  # (ascending)
-            stab = self._kernel_stability(stable, ev, d, thr, jac, hz, st)
-        res = {"position": float(ep), "orientation": float(er), "statics": float(rs)}
-        wkey = key + f6.tobytes()
-        self._fast_cache = (wkey + pt.tobytes() + rt.tobytes(), res, stab, x, f, f6, p_t, r_t)
-        self._fast_fact = (key, kin, st, jac, qf, rr, f, r, tau, hz, f6, step_fn)
-        self._fast_cond = (key, info[1])
-        remember_lazy(self.vm, kin, wkey, _blocks_builder(jac, hz, nt, kt, st))
-        return x, f, it, st, kf, ev, res, stab
+        return self._looped_finish(ctx, plan, plan[15], fact, out, pt, rt, p_t, r_t)
 
     def _looped_plan(self, ctx):
         """The per-context constants of :meth:`_fused_looped`, kept as ``ctx``'s eleventh item (with
         the kinematics' buffers ``(j6, pos, rot)`` as its tenth): ``(kinematics, step function,
         buffers, ci, cf, kz, mask, θ₀, variable scales, error scales, threshold, d = n − m, nθ, K_θ, the
-        pool of fresh kernel buffers of :func:`vjm_pin.solver.kernel.workspace_after`)``."""
+        pool of fresh kernel buffers of :func:`vjm_pin.solver.kernel.workspace_after`, the fields of a
+        certified stable verdict (:meth:`SpectrumLater.stable_fields`))``."""
         kin = self.kin
         _, consts, cf, thr, step_fn, direct = ctx[:6]
         _, kz, mask, theta0, vscale, escale = direct
@@ -1193,8 +1179,9 @@ class EquilibriumSolver:
         kbuf = ctx[9]
         if kbuf is None:
             kbuf = ctx[9] = (np.empty((6, kin.model.nv)), np.empty(3), np.empty((3, 3)))
-        plan = (kin, step_fn, kbuf, consts[0], cf, kz, mask, theta0, vscale, escale, thr,
-                len(self.free) - len(self.task), self.nt, self.vm.K_theta, [])
+        d = len(self.free) - len(self.task)
+        plan = (kin, step_fn, kbuf, consts[0], cf, kz, mask, theta0, vscale, escale, thr, d, self.nt,
+                self.vm.K_theta, [], SpectrumLater.stable_fields(d, thr, _kernel.spectrum))
         if len(ctx) > 10:
             ctx[10] = plan
         else:
