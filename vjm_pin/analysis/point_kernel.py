@@ -290,7 +290,7 @@ class PointKernel:
 def _top_eigpair(a):
     """The largest eigenvalue of the symmetric (n, n) ``a`` (lower triangle read; ``a`` is
     overwritten) and a unit eigenvector, for :func:`_point_loops` (compiled with it): Householder
-    tridiagonalisation ``a = Q T Qᵀ`` (``4n³/3``), bisection (by quarters) on the Sturm count
+    tridiagonalisation ``a = Q T Qᵀ`` (``4n³/3``; on both triangles, by rows), bisection (by quarters) on the Sturm count
     of ``T`` from the Gershgorin bracket to LAPACK's tolerance ``max(2ε|λ|, ε‖T‖)``, inverse
     iteration on ``T`` (partial pivoting, three solves from a fixed start) and ``Q`` applied to
     the vector — instead of every eigenpair
@@ -299,46 +299,62 @@ def _top_eigpair(a):
     n = a.shape[0]
     d = np.zeros(n)
     e = np.zeros(n)
-    vs = np.zeros((n, n))  # Householder vectors: column k acts on rows k+1..n-1
+    vs = np.zeros((n, n))  # Householder vectors: row k acts on entries k+1..n-1
     taus = np.zeros(n)
     p = np.zeros(n)
+    # the lower triangle mirrored, then both triangles kept (a stays exactly symmetric: the two
+    # products of an entry and of its mirror are added in either order), so every access is along a
+    # row: ``p = τ A22 v`` as a sum of rows ``v_j a[j]`` (each p_i accumulated in the same order
+    # j = k+1.. as the dot product of the lower-triangle formulation: the same numbers)
+    for i in range(n):
+        for j in range(i):
+            a[j, i] = a[i, j]
     for k in range(n - 2):
         nrm = 0.0
         for i in range(k + 1, n):
-            nrm += a[i, k] * a[i, k]
+            nrm += a[k, i] * a[k, i]
         nrm = np.sqrt(nrm)
         d[k] = a[k, k]
         if nrm == 0.0:
             e[k] = 0.0
             continue
-        alpha = -nrm if a[k + 1, k] >= 0 else nrm
+        alpha = -nrm if a[k, k + 1] >= 0 else nrm
         vv = 0.0
         for i in range(k + 1, n):
-            vi = a[i, k] - alpha if i == k + 1 else a[i, k]
-            vs[i, k] = vi
+            vi = a[k, i] - alpha if i == k + 1 else a[k, i]
+            vs[k, i] = vi
             vv += vi * vi
         e[k] = alpha
         if vv == 0.0:
             continue
         tau = 2.0 / vv
         taus[k] = tau
-        # p = τ A22 v (lower triangle of A22), K = τ/2 pᵀv, w = p − K v, A22 −= v wᵀ + w vᵀ
-        for i in range(k + 1, n):
-            acc = 0.0
-            for j in range(k + 1, i + 1):
-                acc += a[i, j] * vs[j, k]
-            for j in range(i + 1, n):
-                acc += a[j, i] * vs[j, k]
-            p[i] = tau * acc
+        # p = τ A22 v, K = τ/2 pᵀv, w = p − K v, A22 −= v wᵀ + w vᵀ (on views from k+1: loops
+        # from 0 compile to vector instructions, indices from k+1 do not)
+        vk = vs[k, k + 1:]
+        pk = p[k + 1:]
+        nk = n - k - 1
+        for i in range(nk):
+            pk[i] = 0.0
+        for j in range(nk):
+            vj = vk[j]
+            aj = a[k + 1 + j, k + 1:]
+            for i in range(nk):
+                pk[i] += aj[i] * vj
+        for i in range(nk):
+            pk[i] *= tau
         pv = 0.0
-        for i in range(k + 1, n):
-            pv += p[i] * vs[i, k]
+        for i in range(nk):
+            pv += pk[i] * vk[i]
         kk = 0.5 * tau * pv
-        for i in range(k + 1, n):
-            p[i] -= kk * vs[i, k]
-        for i in range(k + 1, n):
-            for j in range(k + 1, i + 1):
-                a[i, j] -= vs[i, k] * p[j] + p[i] * vs[j, k]
+        for i in range(nk):
+            pk[i] -= kk * vk[i]
+        for i in range(nk):
+            vi = vk[i]
+            pi = pk[i]
+            ai = a[k + 1 + i, k + 1:]
+            for j in range(nk):
+                ai[j] -= vi * pk[j] + pi * vk[j]
     if n >= 2:
         d[n - 2] = a[n - 2, n - 2]
         e[n - 2] = a[n - 1, n - 2]
@@ -469,42 +485,68 @@ def _top_eigpair(a):
             continue
         s = 0.0
         for i in range(k + 1, n):
-            s += vs[i, k] * y[i]
+            s += vs[k, i] * y[i]
         s *= taus[k]
         for i in range(k + 1, n):
-            y[i] -= s * vs[i, k]
+            y[i] -= s * vs[k, i]
     return lam, y
 
 
-def _reduced(bq, uh, m, n):
-    """``Vᵀ sym(A) V`` (``n − m + 1`` square) from ``bq = Qᵀ sym(A) Q`` and ``û`` (m,), ``V = Q [[0, û], [I, 0]]``
-    (the margin's matrix of :func:`_point_loops` and :func:`_reuse_point_loops`)."""
+def _reduced(bt, uh, m, n):
+    """``Vᵀ sym(A) V`` (``n − m + 1`` square) from ``bt = (Qᵀ sym(A) Q)ᵀ`` (:func:`_q_both_sides`) and
+    ``û`` (m,), ``V = Q [[0, û], [I, 0]]`` (the margin's matrix of :func:`_point_loops` and
+    :func:`_reuse_point_loops`; every entry of ``Qᵀ sym(A) Q`` read from its mirror in ``bt``)."""
     dim = n - m + 1
     red = np.empty((dim, dim))
     for i in range(n - m):
         for j in range(i + 1):
-            t = 0.5 * (bq[m + i, m + j] + bq[m + j, m + i])
+            t = 0.5 * (bt[m + j, m + i] + bt[m + i, m + j])
             red[i, j] = t
             red[j, i] = t
         s = 0.0
         for a3 in range(m):
-            s += uh[a3] * 0.5 * (bq[a3, m + i] + bq[m + i, a3])
+            s += uh[a3] * 0.5 * (bt[m + i, a3] + bt[a3, m + i])
         red[dim - 1, i] = s
         red[i, dim - 1] = s
     s = 0.0
     for a3 in range(m):
         for b3 in range(m):
-            s += uh[a3] * bq[a3, b3] * uh[b3]
+            s += uh[a3] * bt[b3, a3] * uh[b3]
     red[dim - 1, dim - 1] = s
     return red
+
+
+def _abs_sums(s, cs):
+    """``(‖s‖₁, ‖s‖∞)``: the largest column and row sums of ``|s|`` in one row-major pass (the
+    column sums accumulated in ``cs``), every sum in index order (the numbers of the column-by-column
+    loops they replace)."""
+    e = s.shape[0]
+    for j in range(e):
+        cs[j] = 0.0
+    rmax = 0.0
+    for i in range(e):
+        r = 0.0
+        for j in range(e):
+            t = abs(s[i, j])
+            r += t
+            cs[j] += t
+        rmax = max(rmax, r)
+    cmax = 0.0
+    for j in range(e):
+        cmax = max(cmax, cs[j])
+    return cmax, rmax
 
 
 def _eq28_tangent(jac, hz, kz, dt, nt, sing_rcond, xd, fd):
     """The tangent of eq. (29) along ``d_t`` for the point kernels (:func:`_point_loops`,
     :func:`_reuse_point_loops`): eq. (28) in the order (F, q, θ), equilibrated as
-    ``stiffness._ruiz``, inverted, with the regularity test of
-    :func:`~vjm_pin.solver.stiffness._inverse_if_regular`; ``δx`` (θ, q order) into ``xd``, ``δF``
-    into ``fd``. Returns ``(ok, k = d_tᵀ δF)``; not ok (``xd``, ``fd`` untouched) when the test fails."""
+    ``stiffness._ruiz`` (the same numbers), inverted by LAPACK (numba's ``np.linalg.inv``: the
+    numbers of the generic path, which the tests compare at 1e-9 where ``k`` is a small difference of
+    large terms), with the regularity test of :func:`~vjm_pin.solver.stiffness._inverse_if_regular`
+    (``√(‖S‖₁‖S‖∞)·√(‖S⁻¹‖₁‖S⁻¹‖∞)·SINGULAR_RCOND·10 ≤ 1``, the norms by :func:`_abs_sums`); ``δx``
+    (θ, q order) into ``xd``, ``δF`` into ``fd``. Returns ``(ok, k = d_tᵀ δF)``; not ok (``xd``,
+    ``fd`` untouched) when the test fails or the matrix is exactly singular or not finite (declined,
+    not raised)."""
     m, n = jac.shape
     nq = n - nt
     e = m + n
@@ -539,30 +581,18 @@ def _eq28_tangent(jac, hz, kz, dt, nt, sing_rcond, xd, fd):
     for i in range(e):
         for j in range(e):
             sm[i, j] = a[i, j] * (d[i] * d[j])
-    inv = np.linalg.inv(sm)
+    cs = rr  # (scratch)
+    c1s, r1s = _abs_sums(sm, cs)
+    try:
+        inv = np.linalg.inv(sm)
+    except Exception:  # exactly singular or not finite (numba's LinAlgError): declined, not raised
+        return False, np.nan
     if not np.all(np.isfinite(inv)):
         return False, np.nan
-    c1s = 0.0
-    r1s = 0.0
-    c1i = 0.0
-    r1i = 0.0
-    for i in range(e):
-        cs = 0.0
-        rs = 0.0
-        ci = 0.0
-        ri = 0.0
-        for j in range(e):
-            cs += abs(sm[j, i])
-            rs += abs(sm[i, j])
-            ci += abs(inv[j, i])
-            ri += abs(inv[i, j])
-        c1s = max(c1s, cs)
-        r1s = max(r1s, rs)
-        c1i = max(c1i, ci)
-        r1i = max(r1i, ri)
+    c1i, r1i = _abs_sums(inv, cs)
     if not np.sqrt(c1s * r1s) * np.sqrt(c1i * r1i) * sing_rcond * 10.0 <= 1.0:
         return False, np.nan
-    xv = np.zeros(e)
+    xv = np.empty(e)
     for i in range(e):
         acc = 0.0
         for c in range(m):
@@ -719,12 +749,18 @@ def _householder_r(hh, m):
 
 
 def _q_both_sides(hh, a, m, n):
-    """``a ← Qᵀ a Q`` in place for an (n, n) ``a`` (the reflectors of :func:`_q_vector`): the rows
-    by :func:`vjm_pin.solver.kernel._reflect_rows` (``Qᵀ a``), then every row ``r`` from the right
-    (``(Qᵀ a[r]ᵀ)ᵀ``, :func:`_q_vector`)."""
+    """``(Qᵀ a Q)ᵀ`` for an (n, n) ``a`` (the reflectors of :func:`_q_vector`), a new array; ``a`` is
+    overwritten by ``Qᵀ a``. Row operations only (:func:`vjm_pin.solver.kernel._reflect_rows`):
+    ``Qᵀ a``, its transpose, ``Qᵀ (Qᵀ a)ᵀ = (Qᵀ a Q)ᵀ`` — column ``r`` of the result is row ``r`` of
+    ``Qᵀ a`` reflected with the same operations as :func:`_q_vector` would apply to it (the same
+    numbers), vectorised across the rows instead of one row at a time."""
     _reflect_rows(hh, a, m, n)
-    for r in range(n):
-        _q_vector(hh, a[r], m, n, True)
+    at = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            at[i, j] = a[j, i]
+    _reflect_rows(hh, at, m, n)
+    return at
 
 
 def _margin_tail(jfree, hh, hz, kz, task, dt, mask, wrench, use_rate, fast_rank, xd, fd):
@@ -782,8 +818,9 @@ def _margin_tail(jfree, hh, hz, kz, task, dt, mask, wrench, use_rate, fast_rank,
         for j in range(n):
             asym[i, j] = 0.5 * (hz[i, j] + hz[j, i]) - kz[i, j]
     bq = asym.copy()
-    _q_both_sides(hh, bq, m, n)
-    mu, top = _top_eigpair(_reduced(bq, uh, m, n))
+    bt = _q_both_sides(hh, bq, m, n)
+    red = _reduced(bt, uh, m, n)
+    mu, top = _top_eigpair(red)
     if not use_rate:
         return 0, mu, nan
     w = np.empty(n)  # V top = Q [û top[−1]; top[:n−m]]
@@ -865,7 +902,7 @@ _fused = None  # the compiled (_predict_loops, _fused_point_loops, _scaled_diff)
 _compiled = None  # the compiled _point_loops once loaded, False when numba is unavailable
 _reuse = None  # the compiled _reuse_point_loops once loaded (compiled())
 #: This module's njit helpers, compiled (before the kernels that call them) by compiled().
-_OWN_HELPERS = ("_top_eigpair", "_eq28_tangent", "_reduced", "_rate_value", "_householder_r",
+_OWN_HELPERS = ("_top_eigpair", "_abs_sums", "_eq28_tangent", "_reduced", "_rate_value", "_householder_r",
                 "_q_both_sides", "_margin_tail")
 #: The dense kernel's helpers (:mod:`vjm_pin.solver.kernel`) this module calls, compiled there once
 #: (numba's on-disk cache of this module does not see edits of kernel.py: clear ``__pycache__`` then).
