@@ -30,6 +30,13 @@ the rank test are the dense kernel's arithmetic, unchanged (the same bits), so t
 tuple ``fact`` can be handed between the two implementations (the chain kernel appends the six
 Jacobian rows to the reflectors, rows the dense kernel never reads).
 
+A converged iteration (the corrector's last) keeps its factorisation of eq. (28) in a per-thread
+workspace of the layout (:func:`_workspace`); the curve's point at that equilibrium, which factorises
+the same matrix for the tangent of eq. (29), uses it when its Jacobian, wrench and task rows are
+bit for bit the iteration's (:func:`_ws_match`), so the point's numbers are the same bits either way.
+The dense Hessian handed back in ``fact`` is :func:`_hessian_rows` (the dense kernel's entries, same
+bits, without a branch in the inner loop).
+
 Where the elimination is not trustworthy (a pivot with a reciprocal condition below
 :data:`TRUST_RCOND`: next to a critical point; a solve residual above
 :data:`~vjm_pin.solver.chain_algebra.SOLVE_RTOL`; an eigenvalue not certified) the routine says
@@ -59,7 +66,7 @@ import numpy as np
 
 from vjm_pin.solver import chain_algebra as _algebra
 from vjm_pin.solver import kernel as _kernel
-from vjm_pin.solver.chain_algebra import PIVOT_RCOND, RHO_FACTOR, SOLVE_RTOL, _factor_loops, _split
+from vjm_pin.solver.chain_algebra import PIVOT_RCOND, RHO_FACTOR, SOLVE_RTOL, _factor_loops, _inertia_small, _split
 from vjm_pin.solver.chain_algebra import _matvec_loops as _matvec
 from vjm_pin.solver.chain_algebra import _solve_loops as _solve
 from vjm_pin.solver.kernel import (
@@ -321,6 +328,135 @@ def _kkt_solve(starts, wd, wu, wv, wp, wq, cb, sigma, bst, pinv, bu, fx, fy, bq,
     return xs, lam, res
 
 
+def _inertia_factor(starts, diag, u, v, p, q):
+    """The symmetric ``lean`` block elimination of chain_algebra's ``_factor_loops`` for the inertia
+    alone: ``(rcond_min, bad, npos, nneg, nzero)``, the same arithmetic in the same order (the same
+    pivot blocks, reciprocal conditions and counts, bit for bit), without the factors a solve needs
+    (no ``x``; this block's inverse and ``y`` kept only until ``G`` is updated): a Sturm count
+    whose factorisation is not used (:func:`_count_only`)."""
+    n, r = u.shape
+    s = q.shape[1]
+    bmax = diag.shape[1]
+    g = np.zeros((r, s))
+    ug = np.zeros((bmax, s))
+    pi = np.zeros((bmax, bmax))
+    work = np.zeros((bmax, 2 * bmax))
+    vt = np.zeros((bmax, r))
+    sm = np.zeros((bmax, bmax))
+    pk = np.zeros((bmax, bmax))
+    yk = np.zeros((bmax, s))
+    rc_min = np.inf
+    npos, nneg, nzero = 0, 0, 0
+    for k in range(len(starts) - 1):
+        a, e = starts[k], starts[k + 1]
+        nk = e - a
+        for i in range(nk):
+            for c in range(s):
+                t = 0.0
+                for l in range(r):
+                    t += u[a + i, l] * g[l, c]
+                ug[i, c] = t
+        ref_d, ref_c, ref_p = 0.0, 0.0, 0.0
+        for i in range(nk):
+            rd, rcr = 0.0, 0.0
+            for j in range(nk):
+                t = 0.0
+                for c in range(s):
+                    t += ug[i, c] * q[a + j, c]
+                pi[i, j] = diag[a + i, j] - t
+                rd += abs(diag[a + i, j])
+                rcr += abs(t)
+            ref_d = max(ref_d, rd)
+            ref_c = max(ref_c, rcr)
+        for i in range(nk):
+            for j in range(i + 1, nk):
+                t = 0.5 * (pi[i, j] + pi[j, i])
+                pi[i, j] = t
+                pi[j, i] = t
+        for i in range(nk):
+            rp = 0.0
+            for j in range(nk):
+                rp += abs(pi[i, j])
+            ref_p = max(ref_p, rp)
+        ref = max(ref_d, max(ref_c, ref_p))
+        # Gauss-Jordan inverse with partial pivoting: work = [pi | I]
+        for i in range(nk):
+            for j in range(nk):
+                work[i, j] = pi[i, j]
+                work[i, nk + j] = 1.0 if i == j else 0.0
+        ok = True
+        for col in range(nk):
+            best, piv = -1.0, col
+            for i in range(col, nk):
+                if abs(work[i, col]) > best:
+                    best, piv = abs(work[i, col]), i
+            if not (best > 0.0) or not np.isfinite(best):
+                ok = False
+                break
+            if piv != col:
+                for j in range(2 * nk):
+                    t = work[col, j]
+                    work[col, j] = work[piv, j]
+                    work[piv, j] = t
+            dv = work[col, col]
+            for j in range(2 * nk):
+                work[col, j] /= dv
+            for i in range(nk):
+                if i != col:
+                    f = work[i, col]
+                    if f != 0.0:
+                        for j in range(2 * nk):
+                            work[i, j] -= f * work[col, j]
+        inv_norm = 0.0
+        for i in range(nk):
+            ri = 0.0
+            for j in range(nk):
+                t = work[i, nk + j]
+                pk[i, j] = t
+                ri += abs(t)
+            inv_norm = max(inv_norm, ri)
+        if not ok or not np.isfinite(inv_norm):
+            return 0.0, True, npos, nneg, nzero
+        rc = 1.0 / (inv_norm * ref) if ref > 0.0 else 0.0
+        if rc < rc_min:
+            rc_min = rc
+        for i in range(nk):
+            for j in range(nk):
+                sm[i, j] = pi[i, j]
+        cp, cn, cz = _inertia_small(sm, nk, 1e-14 * nk * ref)
+        npos += cp
+        nneg += cn
+        nzero += cz
+        for i in range(nk):
+            for l in range(r):
+                t = 0.0
+                for c in range(s):
+                    t += q[a + i, c] * g[l, c]
+                vt[i, l] = v[a + i, l] - t
+        for i in range(nk):
+            for c in range(s):
+                t = 0.0
+                for j in range(nk):
+                    t += pk[i, j] * (p[a + j, c] - ug[j, c])
+                yk[i, c] = t
+        for l in range(r):
+            for c in range(s):
+                t = 0.0
+                for i in range(nk):
+                    t += vt[i, l] * yk[i, c]
+                g[l, c] += t
+    return rc_min, False, npos, nneg, nzero
+
+
+def _count_only(bst, bd, bu, bv, bp, bq, s, dpos, k, sigma):
+    """:func:`_count` without the factorisation (:func:`_inertia_factor`): the same count."""
+    sh = _shifted(bd, s, dpos, sigma)
+    rc, bad, npos, nneg, nzero = _inertia_factor(bst, sh, bu, bv, bp, bq)
+    if bad or not rc >= PIVOT_RCOND or npos < k or nneg < k or nzero > 0:
+        return -1
+    return nneg - k
+
+
 def _count(bst, bd, bu, bv, bp, bq, s, dpos, k, sigma):
     """Sturm count: eigenvalues of ``Zᵀ W_s Z`` below ``σ`` (−1 when not reliable), and the
     factorisation at ``σ`` ``(pinv, x, y)``."""
@@ -410,21 +546,32 @@ def _inverse(starts, sd, su, sv, sp, sq, bst, pinv, bu, fx, fy, bq, s, rho, k, l
     return False, prev, v
 
 
-def _smallest(starts, dpos, kp, jz, f6, kd, cb, scale, has_guess, gvec, vtol):
+def _rnd_start(n):
+    """The fixed pseudo-random start of :func:`_smallest` (length ``n``, before its projection)."""
+    rnd = np.empty(n)
+    for i in range(n):
+        rnd[i] = math.sin(1.0 + 0.7 * i) + 0.3 * math.cos(2.3 * i)
+    return rnd
+
+
+def _smallest(starts, dpos, kp, jz, f6, kd, cb, scale, has_guess, gvec, vtol, rnd0=None):
     """Smallest eigenvalue ``λ₁`` of ``Zᵀ W_s Z`` (``Z``: null space of ``cb``) and a unit
     eigenvector (chain order): ``(ok, λ₁, vector)`` (module docstring). ``gvec``: a previous
     eigenvector (length n; used when ``has_guess``); when the attempt from it fails (a mode
-    switch, no convergence, no certificate) the bracket is made from scratch."""
+    switch, no convergence, no certificate) the bracket is made from scratch. ``rnd0``:
+    :func:`_rnd_start` of length n when given (a workspace's copy), else it is computed."""
     n = jz.shape[1]
     k = cb.shape[0]
     atol = 1e-13 * scale
     sd, su, sv, sp, sq = _w_gens(jz, f6, starts, kd, True)
     bst, bd, bu, bv, bp, bq, s, rho = _bordered(sd, su, sv, sp, sq, starts, dpos, kp, cb)
     empty = np.zeros(n)
-    rnd = np.empty(n)
-    for i in range(n):  # a fixed pseudo-random start (the bisection path, a mixed-in component)
-        rnd[i] = math.sin(1.0 + 0.7 * i) + 0.3 * math.cos(2.3 * i)
-    rnd = _project(cb, rnd)
+    # a fixed pseudo-random start (the bisection path, a mixed-in component)
+    if rnd0 is None:
+        raw = _rnd_start(n)
+    else:
+        raw = rnd0 if rnd0.shape[0] == n else _rnd_start(n)
+    rnd = _project(cb, raw)
     nr = math.sqrt(np.sum(rnd * rnd))
     for attempt in range(2):
         if attempt == 0 and not has_guess:
@@ -460,7 +607,7 @@ def _smallest(starts, dpos, kp, jz, f6, kd, cb, scale, has_guess, gvec, vtol):
             step = scale
             found = False
             for _ in range(64):
-                c, _p, _x, _y = _count(bst, bd, bu, bv, bp, bq, s, dpos, k, hi)
+                c = _count_only(bst, bd, bu, bv, bp, bq, s, dpos, k, hi)
                 if c >= 1:
                     found = True
                     break
@@ -501,7 +648,7 @@ def _smallest(starts, dpos, kp, jz, f6, kd, cb, scale, has_guess, gvec, vtol):
         # certify: no eigenvalue below the converged value (less its accuracy)
         margin = 1e-9 * abs(val) + 1e2 * atol
         for _ in range(6):
-            c, _p, _x, _y = _count(bst, bd, bu, bv, bp, bq, s, dpos, k, val - margin)
+            c = _count_only(bst, bd, bu, bv, bp, bq, s, dpos, k, val - margin)
             if c == 0:
                 return True, val, vec
             if c > 0:
@@ -629,12 +776,163 @@ def _rate_lin(dli, dom, w, g, task):
     return lin
 
 
+def _hessian_rows(jfree, f6, mask, n):
+    """:func:`vjm_pin.solver.kernel._hessian` (the (θ, q)-ordered Hessian of Ψ, eq. 16, in screw
+    form), every entry the same expression evaluated in the same order (so the same bits), written
+    row by row with both cases of the support mask computed and one selected: no branch in the inner
+    loop (~7x faster at n = 146)."""
+    fx, fy, fz, mx, my, mz = f6[0], f6[1], f6[2], f6[3], f6[4], f6[5]
+    d0 = np.empty(n)
+    d1 = np.empty(n)
+    d2 = np.empty(n)
+    e0 = np.empty(n)
+    e1 = np.empty(n)
+    e2 = np.empty(n)
+    w0 = np.empty(n)
+    w1 = np.empty(n)
+    w2 = np.empty(n)
+    for b in range(n):
+        v0, v1, v2 = jfree[0, b], jfree[1, b], jfree[2, b]
+        a0, a1, a2 = jfree[3, b], jfree[4, b], jfree[5, b]
+        d0[b] = fz * v1 - fy * v2
+        d1[b] = -fz * v0 + fx * v2
+        d2[b] = fy * v0 - fx * v1
+        e0[b] = mz * a1 - my * a2
+        e1[b] = -mz * a0 + mx * a2
+        e2[b] = my * a0 - mx * a1
+        w0[b], w1[b], w2[b] = a0, a1, a2
+    hz = np.empty((n, n))
+    for i in range(n):
+        di0, di1, di2 = d0[i], d1[i], d2[i]
+        ei0, ei1, ei2 = e0[i], e1[i], e2[i]
+        wi0, wi1, wi2 = w0[i], w1[i], w2[i]
+        row = hz[i]
+        mrow = mask[i]
+        for j in range(n):
+            ta = w0[j] * di0 + w1[j] * di1 + w2[j] * di2 + (ei0 * w0[j] + ei1 * w1[j] + ei2 * w2[j])
+            tb = wi0 * d0[j] + wi1 * d1[j] + wi2 * d2[j]
+            row[j] = ta if mrow[j] else tb
+    return hz
+
+
+#: Header of a factorisation workspace (:func:`_ws_store`): valid flag, n, k, block width, r, s, ρ,
+#: and the length of the :func:`_rnd_start` vector kept after it (:func:`_workspace`; 0: none).
+_WS_HEAD = 8
+
+
+def _ws_size(n, k, b):
+    """Length of a workspace for ``n`` chain coordinates, ``k ≤ 6`` border rows and ``K_θ`` blocks
+    of width ``b`` (:func:`_ws_store`; generators of ``W`` with 3 columns)."""
+    kk = max(k, 6)
+    r = 3 + kk
+    return _WS_HEAD + n + 6 * n + 6 + kk + n + (n + kk) * (4 * r + max(b, kk))
+
+
+def _bits_equal(a, b):
+    """``a`` and ``b`` are the same float64 (the sign of a zero included; NaN never)."""
+    return a == b and (a != 0.0 or math.copysign(1.0, a) == math.copysign(1.0, b))
+
+
+def _ws_store(ws, jz, f6, task, s, rho, bu, bq, pinv, fx, fy):
+    """Keep the factorisation of eq. (28)'s bordered matrix (:func:`_bordered`, :func:`_factor`) of
+    the Jacobian columns ``jz`` (chain order), the wrench ``f6`` and the task rows ``task`` in the
+    workspace ``ws`` (1-D, :func:`_ws_size`; nothing kept when it is too short), for
+    :func:`_ws_match` / :func:`_ws_views`: the curve's point at a converged equilibrium factorises
+    the same matrix (the tangent of eq. 29)."""
+    n = jz.shape[1]
+    k = task.shape[0]
+    nk, r = bu.shape
+    sc = bq.shape[1]
+    bsz = pinv.shape[1]
+    need = _WS_HEAD + n + 6 * n + 6 + k + n + nk * (2 * r + 2 * sc + bsz)
+    if ws.shape[0] < need:
+        return
+    ws[0] = 0.0
+    ws[1], ws[2], ws[3], ws[4], ws[5], ws[6] = n, k, bsz, r, sc, rho
+    o = _WS_HEAD + n
+    for a_ in range(6):
+        for i in range(n):
+            ws[o] = jz[a_, i]
+            o += 1
+    for a_ in range(6):
+        ws[o] = f6[a_]
+        o += 1
+    for i in range(k):
+        ws[o] = task[i]
+        o += 1
+    for i in range(n):
+        ws[o] = s[i]
+        o += 1
+    for arr in (bu, bq, fx, fy, pinv):
+        for i in range(nk):
+            for c in range(arr.shape[1]):
+                ws[o] = arr[i, c]
+                o += 1
+    ws[0] = 1.0
+
+
+def _ws_match(ws, jz, f6, task, bsz):
+    """The workspace holds the factorisation of this problem (:func:`_ws_store`): the same bits of
+    ``jz`` and ``f6``, the same task rows and block width."""
+    n = jz.shape[1]
+    k = task.shape[0]
+    if ws.shape[0] < _WS_HEAD or ws[0] != 1.0 or ws[1] != n or ws[2] != k or ws[3] != bsz:
+        return False
+    o = _WS_HEAD + n
+    for a_ in range(6):
+        for i in range(n):
+            if not _bits_equal(ws[o], jz[a_, i]):
+                return False
+            o += 1
+    for a_ in range(6):
+        if not _bits_equal(ws[o], f6[a_]):
+            return False
+        o += 1
+    for i in range(k):
+        if ws[o] != task[i]:
+            return False
+        o += 1
+    return True
+
+
+def _ws_views(ws, n, k):
+    """The kept factorisation (:func:`_ws_match` true): ``(s, ρ, bu, bq, fx, fy, pinv)``, views of ``ws``."""
+    bsz, r, sc, rho = int(ws[3]), int(ws[4]), int(ws[5]), ws[6]
+    nk = n + k
+    o = _WS_HEAD + n + 6 * n + 6 + k
+    s = ws[o:o + n]
+    o += n
+    bu = ws[o:o + nk * r].reshape(nk, r)
+    o += nk * r
+    bq = ws[o:o + nk * sc].reshape(nk, sc)
+    o += nk * sc
+    fx = ws[o:o + nk * r].reshape(nk, r)
+    o += nk * r
+    fy = ws[o:o + nk * sc].reshape(nk, sc)
+    o += nk * sc
+    pinv = ws[o:o + nk * bsz].reshape(nk, bsz)
+    return s, rho, bu, bq, fx, fy, pinv
+
+
+def _ws_rnd(ws, n):
+    """The :func:`_rnd_start` vector kept in the workspace (a view), or an empty view when none."""
+    if ws.shape[0] >= _WS_HEAD + n and ws[7] == n:
+        return ws[_WS_HEAD:_WS_HEAD + n]
+    return ws[:0]
+
+
 # --------------------------------------------------------------------------- the iteration
 def _iterate_chain(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, ci, cf, kz, mask, theta0, vscale,
-                   escale, cols, order, starts, dpos, kd, kp, kscale, klo, khi, has_guess, gvec):
+                   escale, cols, order, starts, dpos, kd, kp, kscale, klo, khi, has_guess, gvec, ws=None):
     """:func:`vjm_pin.solver.kernel._iterate_loops` with the O(n) chain algebra (module
     docstring). Extra results: ``vec`` (the eigenvector of the verdict, chain order, status
-    CONVERGED). Status :data:`NEED_DENSE`: run the dense kernel instead."""
+    CONVERGED; the input ``gvec`` otherwise, unused). Status :data:`NEED_DENSE`: run the dense
+    kernel instead. ``ws``: a workspace (:func:`_ws_size`) in which a converged iteration keeps
+    its factorisation of eq. (28) for the curve's point (:func:`_point_chain`), or None."""
+    if ws is None:
+        wsa = np.zeros(0)
+    else:
+        wsa = ws
     n, nt, m, nip, nir = ci[0], ci[1], ci[2], ci[3], ci[4]
     free = ci[6:6 + n]
     theta_idx = ci[6 + n:6 + n + nt]
@@ -645,7 +943,7 @@ def _iterate_chain(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, c
     follow, polish_step, rank_tol = cf[6] != 0.0, cf[7], cf[8]
     fact_in = fact
     empty = fact_in[3]
-    novec = np.zeros(0)
+    novec = gvec  # (an input array: returned without boxing a new one)
     if refactor:
         hh = np.zeros((m + 7, n))
         for a_ in range(6):
@@ -665,7 +963,7 @@ def _iterate_chain(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, c
         ok, rr, f, r, f6 = _multiplier(jac, hh, tau, task, m, n)
         if not ok:
             return _FACTOR_FAIL, 0.0, 0.0, 0.0, 0.0, fact, empty, empty, empty, novec
-        hz = _hessian(jfree, f6, mask, n) if keep else fact_in[6]
+        hz = _hessian_rows(jfree, f6, mask, n) if keep else fact_in[6]
         fact = (jac, hh, rr, f, r, tau, hz, f6)
     jac, hh, rr, f, r, tau, hz, f6 = fact
     if hh.shape[0] != m + 7:  # a factorisation by the dense kernel: no Jacobian rows here
@@ -691,11 +989,13 @@ def _iterate_chain(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, c
         dx = np.empty(n)
         for c in range(n):
             dx[order[c]] = xs[c, 0]
+        if converged:  # the point of a curve at this equilibrium factorises the same matrix
+            _ws_store(wsa, jz, f6, task, s_, rho, bu, bq, pinv, fx, fy)
         if not converged:
             if follow:  # ½(ZᵀWZ + (ZᵀWZ)ᵀ) − shift·I ≻ 0: no eigenvalue of Zᵀ W_s Z at or below shift
                 sd, su, sv, sp, sq = _w_gens(jz, f6, starts, kd, True)
                 bst2, bd2, bu2, bv2, bp2, bq2, s2, _rho2 = _bordered(sd, su, sv, sp, sq, starts, dpos, kp, cb)
-                cnt, _p, _x, _y = _count(bst2, bd2, bu2, bv2, bp2, bq2, s2, dpos, m, shift)
+                cnt = _count_only(bst2, bd2, bu2, bv2, bp2, bq2, s2, dpos, m, shift)
                 if cnt < 0:
                     return NEED_DENSE, kkt, ep, er, rs, fact_in, empty, empty, empty, novec
                 if cnt > 0:
@@ -720,28 +1020,36 @@ def _iterate_chain(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, c
                     _moved_loops(x, free, dx, flush), empty, novec)
     if not _full_rank(rr, m, rank_tol):
         return _RANK_FAIL, kkt, ep, er, rs, fact if keep else fact_in, empty, empty, empty, novec
-    ok, lam1, vec = _smallest(starts, dpos, kp, jz, f6, kd, cb, kscale, has_guess, gvec, VEC_TOL_VERDICT)
+    ok, lam1, vec = _smallest(starts, dpos, kp, jz, f6, kd, cb, kscale, has_guess, gvec, VEC_TOL_VERDICT,
+                              _ws_rnd(wsa, n))
     if not ok:
         return NEED_DENSE, kkt, ep, er, rs, fact_in, empty, empty, empty, novec
     ev = np.empty(1)
     ev[0] = -lam1
     if refactor and not keep:
-        fact = (jac, hh, rr, f, r, tau, _hessian(jfree, f6, mask, n), f6)
+        fact = (jac, hh, rr, f, r, tau, _hessian_rows(jfree, f6, mask, n), f6)
     return _CONVERGED, kkt, ep, er, rs, fact, empty, empty, ev, vec
 
 
 # --------------------------------------------------------------------------- the point
 def _point_chain(J6, cols, order, task, dt, prow, starts, dpos, kd, kp, kscale, wrench, use_rate, fast_rank,
-                 has_guess, gvec):
+                 has_guess, gvec, ws=None):
     """:func:`vjm_pin.analysis.point_kernel._point_loops` with the O(n) chain algebra:
     ``(status, k, δx ((θ, q) order), δF, μ, dμ/ds, eigenvector (chain order))``; status
-    :data:`NEED_DENSE`: run the dense kernel (which decides, as before)."""
+    :data:`NEED_DENSE`: run the dense kernel (which decides, as before). ``ws``: the workspace of
+    the iterations (:func:`_iterate_chain`) or None: the factorisation of eq. (28) a converged
+    iteration kept there is this point's when its Jacobian, wrench and task rows are bit for bit
+    this point's (the last iteration of the corrector), and is then used as it is."""
     n = cols.shape[0]
     m = task.shape[0]
     nan = np.nan
     xd = np.zeros(n)
     fd = np.zeros(m)
-    novec = np.zeros(0)
+    novec = gvec  # (an input array: returned without boxing a new one; status not 0)
+    if ws is None:
+        wsa = np.zeros(0)
+    else:
+        wsa = ws
     if m < 2 or m > n:
         return NEED_DENSE, nan, xd, fd, nan, nan, novec
     jz, cb = _gather(J6, cols, task)
@@ -751,10 +1059,17 @@ def _point_chain(J6, cols, order, task, dt, prow, starts, dpos, kd, kp, kscale, 
         return NEED_DENSE, nan, xd, fd, nan, nan, novec
     # tangent of eq. (29): W δx − Jᵀ δF = 0, J δx = d_t
     wd, wu, wv, wp, wq = _w_gens(jz, wrench, starts, kd, False)
-    bst, bd, bu, bv, bp, bq, s_, rho = _bordered(wd, wu, wv, wp, wq, starts, dpos, kp, cb)
-    pinv, fx, fy, rc, bad, _a, _b, _c = _factor(bst, bd, bu, bv, bp, bq, False)
-    if bad or not rc >= TRUST_RCOND:
-        return NEED_DENSE, nan, xd, fd, nan, nan, novec
+    if _ws_match(wsa, jz, wrench, task, max(kd.shape[1], m)):
+        # the converged iteration's factorisation of this matrix (it passed the same test)
+        s_, rho, bu, bq, fx, fy, pinv = _ws_views(wsa, n, m)
+        bst = np.empty(starts.shape[0] + 1, np.int64)
+        bst[: starts.shape[0]] = starts
+        bst[starts.shape[0]] = n + m
+    else:
+        bst, bd, bu, bv, bp, bq, s_, rho = _bordered(wd, wu, wv, wp, wq, starts, dpos, kp, cb)
+        pinv, fx, fy, rc, bad, _a, _b, _c = _factor(bst, bd, bu, bv, bp, bq, False)
+        if bad or not rc >= TRUST_RCOND:
+            return NEED_DENSE, nan, xd, fd, nan, nan, novec
     b1 = np.zeros((n, 1))
     b2 = np.empty((m, 1))
     for i in range(m):
@@ -772,7 +1087,8 @@ def _point_chain(J6, cols, order, task, dt, prow, starts, dpos, kd, kp, kscale, 
             return NEED_DENSE, nan, xd, fd, nan, nan, novec
     # μ: the largest eigenvalue of Vᵀ sym(H − K) V, V the null space of P J: −λ₁
     ch = _held_rows(prow, cb)
-    ok, lam1, w = _smallest(starts, dpos, kp, jz, wrench, kd, ch, kscale, has_guess, gvec, VEC_TOL_MARGIN)
+    ok, lam1, w = _smallest(starts, dpos, kp, jz, wrench, kd, ch, kscale, has_guess, gvec, VEC_TOL_MARGIN,
+                            _ws_rnd(wsa, n))
     if not ok:
         return NEED_DENSE, nan, xd, fd, nan, nan, novec
     mu = -lam1
@@ -831,9 +1147,10 @@ def _point_chain(J6, cols, order, task, dt, prow, starts, dpos, kd, kp, kscale, 
 
 # =========================================================================== loading, layout
 _COMPILED: list = []  # [(iterate, point)] once loaded, [None] when numba is unavailable
-_HELPERS = ("_w_gens", "_bordered", "_factor", "_shifted", "_raw_solve", "_kkt_solve", "_count", "_project",
-            "_rayleigh", "_inverse", "_split", "_smallest", "_gather", "_held_rows", "_qr_rank", "_twists",
-            "_twist_rate_row", "_rate_terms", "_rate_lin")
+_HELPERS = ("_hessian_rows", "_bits_equal", "_ws_store", "_ws_match", "_ws_views", "_ws_rnd", "_rnd_start",
+            "_w_gens", "_bordered", "_factor", "_shifted", "_raw_solve", "_kkt_solve", "_inertia_factor",
+            "_count_only", "_count", "_project", "_rayleigh", "_inverse", "_split", "_smallest", "_gather",
+            "_held_rows", "_qr_rank", "_twists", "_twist_rate_row", "_rate_terms", "_rate_lin")
 #: The ones :func:`vjm_pin.analysis.point_kernel._point_loops` calls too.
 RATE_HELPERS = ("_back_substitute", "_twists", "_twist_rate_row", "_rate_terms", "_rate_lin")
 #: The dense kernel's helpers (vjm_pin.solver.kernel) this kernel calls, compiled there once (the block
@@ -969,6 +1286,30 @@ _PROWS: dict = {}  # d_t (bytes, length) -> (m − 1, m) rows spanning its compl
 _GUESS: dict = {}  # id(key object) -> (key object, previous eigenvector in chain order)
 
 
+_TLS = threading.local()  # .ws: id(layout) -> (layout, workspace) of this thread (_workspace)
+#: Workspaces kept per thread (the most recent layouts).
+WS_MAX = 8
+
+
+def _workspace(lay, n):
+    """This thread's factorisation workspace for the layout ``lay`` (:func:`_ws_size`): the
+    iterations of a solve keep their converged factorisation of eq. (28) there, the curve's
+    point reads it (:func:`_point_chain`); per thread, so that a map's workers never share one."""
+    d = getattr(_TLS, "ws", None)
+    if d is None:
+        d = _TLS.ws = {}
+    hit = d.get(id(lay))
+    if hit is not None and hit[0] is lay:
+        return hit[1]
+    ws = np.zeros(_ws_size(n, 6, lay.kd.shape[1]))
+    ws[_WS_HEAD:_WS_HEAD + n] = _rnd_start(n)  # (compiled: the bits _smallest would compute)
+    ws[7] = n
+    if len(d) >= WS_MAX:
+        d.pop(next(iter(d)))
+    d[id(lay)] = (lay, ws)
+    return ws
+
+
 def _guess(key_obj, n):
     hit = _GUESS.get(id(key_obj))
     if hit is not None and hit[0] is key_obj and hit[1].shape[0] == n:
@@ -1044,7 +1385,7 @@ def iterate(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, consts, 
     has, gvec = _guess(ci, n)
     out = fns[0](J6, pos, erot, x, refactor, polish_left, flush, keep, fact, ci, cf, kz, mask, theta0, vscale,
                  escale, lay.cols, lay.order, lay.starts, lay.dpos, lay.kd, lay.kp, lay.kscale, lay.klo, lay.khi,
-                 has, gvec)
+                 has, gvec, _workspace(lay, n))
     if out[0] == NEED_DENSE:
         return dense(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, consts)
     if out[0] == _kernel.CONVERGED:
@@ -1075,12 +1416,13 @@ def point(pk, b, mask, wrench, fast_rank):
                 _PROWS.pop(next(iter(_PROWS)))
             _PROWS[pkey] = prow
     rate_wanted = mask is not None
-    has, gvec = _guess(pk, lay.cols.shape[0])
+    n = lay.cols.shape[0]
+    has, gvec = _guess(pk, n)
     st, k, xd, fd, mu, rate, vec = fns[1](
         np.ascontiguousarray(b.state.jacobian, dtype=float), lay.cols, lay.order, pk.task.astype(np.int64), pk.dt,
         prow, lay.starts, lay.dpos, lay.kd, lay.kp, lay.kscale,
         np.asarray(wrench if wrench is not None else np.zeros(6), dtype=float), rate_wanted, float(fast_rank), has,
-        gvec,
+        gvec, _workspace(lay, n),
     )
     if st != 0:
         return None
