@@ -1157,22 +1157,25 @@ def _bare_iteration_fns(vm: VjmModel, direction, max_deflection: float, kernel) 
 
 def bench_curve_point_vs_release(k: int, steps: int, repeats: int) -> dict:
     """Marginal cost of one point of the Model C compression curve (``trace_curve``: equilibrium,
-    stability, stiffness, critical points) with the release solver and the current one,
-    interleaved: ``(T(steps) − T(steps/4)) / (steps − steps/4)`` over the same deflection range,
-    so the solver construction, the cold first point and the critical-point location, common to
-    both curves, cancel. Also the whole ``steps``-point curve time.
+    stability, stiffness, critical points) with the release and the current code, interleaved:
+    ``(T(steps) − T(steps/4)) / (steps − steps/4)`` over the same deflection range, so the solver
+    construction, the cold first point and the critical-point location, common to both curves,
+    cancel. Also the whole ``steps``-point curve time.
 
-    The release side runs the tracer's per-point work as released too: every point by the
-    generic eq. (30) inverse and ``check_stability_held``, ``dμ/ds`` by a second evaluation
-    (``vjm_pin.analysis.curve._fast_points = False``, the tracer's private switch); the
-    current side by ``vjm_pin.analysis.point_kernel``."""
+    The release side is the whole released package (:func:`release_package`: its own
+    ``trace_curve``, solver and model loader on the same URDF, ``"release": "package"``). Where git
+    or the release commit is unavailable it is the frozen release solver under today's tracer with
+    the tracer's per-point work as released (every point by the generic eq. (30) inverse and
+    ``check_stability_held``, ``dμ/ds`` by a second evaluation: ``curve._fast_points = False``;
+    ``"release": "frozen solver"``), which leaves today's leaner tracer bookkeeping on the release
+    side too; the current side by ``vjm_pin.analysis.point_kernel``."""
     from vjm_pin.analysis import curve as curve_mod
     from vjm_pin.analysis.curve import trace_curve
 
     vm = paper_model(k)
     md = default_max_deflection(vm)
-    Release = release_solver_class()
     short = max(steps // 4, 2)
+    rel = release_package()
 
     def curve(cls, n):
         return lambda: _curve_summary(trace_curve(vm, DIRECTION, md, steps=n, solver=cls(vm)))
@@ -1186,11 +1189,21 @@ def bench_curve_point_vs_release(k: int, steps: int, repeats: int) -> dict:
         finally:
             curve_mod._fast_points = old
 
+    if rel is not None:
+        rvm = rel.model.load_vjm(vm.urdf)
+
+        def release_curve(n):
+            return lambda: _curve_summary(rel.solver.curve.trace_curve(rvm, DIRECTION, md, steps=n))
+
+        release, release_short = (contextlib.nullcontext, release_curve(steps)), (contextlib.nullcontext, release_curve(short))
+    else:
+        Release = release_solver_class()
+        release, release_short = (released_points, curve(Release, steps)), (released_points, curve(Release, short))
     r = side_by_side(
         {
-            "release": (released_points, curve(Release, steps)),
+            "release": release,
             "now": (contextlib.nullcontext, curve(EquilibriumSolver, steps)),
-            "release_short": (released_points, curve(Release, short)),
+            "release_short": release_short,
             "now_short": (contextlib.nullcontext, curve(EquilibriumSolver, short)),
         },
         repeats,
@@ -1201,6 +1214,7 @@ def bench_curve_point_vs_release(k: int, steps: int, repeats: int) -> dict:
         "n_theta": int(vm.n_theta),
         "steps": steps,
         "short_steps": short,
+        "release": "package" if rel is not None else "frozen solver",
         "curve_s": {"release": r["release"]["min"], "now": r["now"]["min"]},
         "per_point_s": marg,
         "speedup": marg["release"] / marg["now"],
@@ -1208,6 +1222,36 @@ def bench_curve_point_vs_release(k: int, steps: int, repeats: int) -> dict:
         "agreement": _agreement(r["release"]["value"], r["now"]["value"]),
         "critical": r["now"]["value"]["critical"],
     }
+
+
+_RELEASE_PACKAGE = []  # [module or None] once tried (release_package)
+
+
+def release_package():
+    """The package as of :data:`RELEASE_COMMIT` (``git archive``), importable next to today's as
+    ``vjm_pin_release`` (its own imports renamed), or None when git or the commit is unavailable
+    or it does not import. Tried once per process."""
+    if _RELEASE_PACKAGE:
+        return _RELEASE_PACKAGE[0]
+    mod = None
+    d = _release_package_dir()
+    if d is not None:
+        import importlib
+        import re
+
+        src, dst = Path(d) / "vjm_pin", Path(d) / "vjm_pin_release"
+        try:
+            src.rename(dst)
+            for f in dst.rglob("*.py"):
+                f.write_text(re.sub(r"\bvjm_pin\b", "vjm_pin_release", f.read_text(encoding="utf-8")), encoding="utf-8")
+            sys.path.insert(0, d)
+            mod = importlib.import_module("vjm_pin_release")
+            for sub in ("model", "solver.curve"):
+                importlib.import_module("vjm_pin_release." + sub)
+        except Exception:  # noqa: BLE001 - any failure: the frozen solver instead
+            mod = None
+    _RELEASE_PACKAGE.append(mod)
+    return mod
 
 
 #: The release the "release" columns compare with (before issue 14's kernel and import work).
@@ -1677,7 +1721,7 @@ def format_issue14(q: dict, machine: dict) -> str:
     for key in ("curve_k1", "curve_k8"):
         c = q[key]
         lines.append(
-            f"  curve point, Model C k={c['k']} (nθ={c['n_theta']}, {c['steps']} points): release {c['per_point_s']['release'] * 1e3:.2f} ms, "
+            f"  curve point, Model C k={c['k']} (nθ={c['n_theta']}, {c['steps']} points): release ({c.get('release', 'frozen solver')}) {c['per_point_s']['release'] * 1e3:.2f} ms, "
             f"now {c['per_point_s']['now'] * 1e3:.2f} ms (marginal): {c['speedup']:.2f}x; whole curve {c['curve_s']['release']:.2f} -> {c['curve_s']['now']:.2f} s"
             + (f" (target >= 10x: {'MET' if c['speedup'] >= 10 else 'NOT MET'})" if c["k"] == 1 else "")
             + f"; forces and critical points agree to {c['agreement']:.1e}"

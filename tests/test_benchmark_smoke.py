@@ -172,3 +172,23 @@ def test_opensees_same_accuracy_comparison(bench):
     assert o["vjm_within_tol"] == (abs(r["vjm_curve"]["rel_err"]) <= tol)
     text = "\n".join(bench.format_opensees_same_accuracy(o))
     assert f"OpenSees {n} corotational elements" in text
+
+
+def test_release_package_traces_the_same_curve(bench):
+    """The benchmark's release side (the package of ``RELEASE_COMMIT`` imported as ``vjm_pin_release``)
+    traces the same Model C curve as today's code: forces to 1e-9, the same critical point to its
+    location tolerance; its model is loaded from the same URDF."""
+    rel = bench.release_package()
+    if rel is None:
+        pytest.skip("git or the release commit is unavailable (a source archive without history)")
+    from vjm_pin.analysis.curve import trace_curve
+
+    vm = bench.paper_model(1)
+    md = bench.default_max_deflection(vm)
+    old = rel.solver.curve.trace_curve(rel.model.load_vjm(vm.urdf), bench.DIRECTION, md, steps=8)
+    new = trace_curve(vm, bench.DIRECTION, md, steps=8)
+    assert rel.__name__ == "vjm_pin_release" and not rel.__file__.startswith(str(ROOT))
+    scale = np.abs(new.forces).max()
+    assert np.abs(np.asarray(old.forces) - new.forces).max() <= 1e-9 * scale
+    assert len(old.critical) == len(new.critical) == 1
+    assert old.critical[0].force == pytest.approx(new.critical[0].force, rel=1e-7)
