@@ -35,17 +35,10 @@ def _verdict(stab):
     return (type(stab).__name__, stab.stable, stab.null_dim, stab.tolerance, stab.eigenvalues)
 
 
-@pytest.mark.parametrize("name", ["paper-c-s", "paper-b-z"])
-def test_straight_route_is_the_general_route(name, monkeypatch):
-    """A warm sequence of predicted starts (a curve's steps: each from the equilibrium before, moved):
-    the straight route is taken and gives the general route's raw result (configuration, multiplier,
-    iterations, state, factorisation, eigenvalues, residuals, verdict), the same ``_fast_its`` where it
-    gives way, and leaves the same caches (``_fast_fact``, ``_fast_cache``, ``_fast_cond``, ``kin._last``
-    and the kept Blocks, built)."""
-    pytest.importorskip("numba")
-    monkeypatch.setenv("VJM_PIN_JIT", "1")
+
+def _count_straight_route(monkeypatch) -> dict:
+    """Count the calls of ``EquilibriumSolver._corrector_looped`` (the straight route): ``{"n": calls}``."""
     from vjm_pin.solver import equilibrium as eq_mod
-    from vjm_pin.solver.blocks import evaluate_blocks
 
     taken = {"n": 0}
     original = eq_mod.EquilibriumSolver._corrector_looped
@@ -55,6 +48,20 @@ def test_straight_route_is_the_general_route(name, monkeypatch):
         return original(self, *args)
 
     monkeypatch.setattr(eq_mod.EquilibriumSolver, "_corrector_looped", counted)
+    return taken
+
+@pytest.mark.parametrize("name", ["paper-c-s", "paper-b-z"])
+def test_straight_route_is_the_general_route(name, monkeypatch):
+    """A warm sequence of predicted starts (a curve's steps: each from the equilibrium before, moved):
+    the straight route is taken and gives the general route's raw result (configuration, multiplier,
+    iterations, state, factorisation, eigenvalues, residuals, verdict), the same ``_fast_its`` where it
+    gives way, and leaves the same caches (``_fast_fact``, ``_fast_cache``, ``_fast_cond``, ``kin._last``
+    and the kept Blocks, built)."""
+    pytest.importorskip("numba")
+    monkeypatch.setenv("VJM_PIN_JIT", "1")
+    from vjm_pin.solver.blocks import evaluate_blocks
+
+    taken = _count_straight_route(monkeypatch)
     vm = resolve_model(name)
     d = np.array([-1.0, 0, 0, 0, 0, 0])
     base = EquilibriumSolver(vm)
@@ -113,16 +120,7 @@ def test_straight_route_is_the_general_route(name, monkeypatch):
 def test_straight_route_needs_fresh_inputs(monkeypatch):
     """Without ``FRESH`` (``flushed`` True or False) the corrector takes the general route; with the numpy
     kernel (``VJM_PIN_JIT=0``) there is no straight route at all."""
-    from vjm_pin.solver import equilibrium as eq_mod
-
-    taken = {"n": 0}
-    original = eq_mod.EquilibriumSolver._corrector_looped
-
-    def counted(self, *args):
-        taken["n"] += 1
-        return original(self, *args)
-
-    monkeypatch.setattr(eq_mod.EquilibriumSolver, "_corrector_looped", counted)
+    taken = _count_straight_route(monkeypatch)
     monkeypatch.setenv("VJM_PIN_JIT", "0")
     vm = resolve_model("paper-c-s")
     d = np.array([-1.0, 0, 0, 0, 0, 0])
