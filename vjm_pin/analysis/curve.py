@@ -443,6 +443,16 @@ class _LateBP(_BP):
         self.s, self.eq, self.force, self.k, self.st = float(s), eq, float(force), k, None
         self.mu, self.dmu, self.tan, self.hist = mu, None, False, None
 
+    @classmethod
+    def with_tangent(cls, s, eq, force, k, mu, stab, dmu, tan) -> _LateBP:
+        """``_LateBP(s, eq, force, k, mu, stab)`` with its ``dμ/ds`` and tangent set, built slot by slot
+        (the fused curve step makes one per point: no ``__init__`` call)."""
+        p = _new_object(cls)
+        p._stab, p._lv = stab, None
+        p.s, p.eq, p.force, p.k, p.st, p.mu = float(s), eq, float(force), k, None, mu
+        p.dmu, p.tan, p.hist = dmu, tan, None
+        return p
+
     def _get_lam(self) -> float:
         v = self._lv
         if v is None:
@@ -847,12 +857,8 @@ class _Tracer:
             if force is None:
                 force = self.d @ eq.wrench
             if ev is None:  # "stable" certified, the eigenvalues when first read (_LateBP)
-                # _LateBP(s, eq, force, k, mu, raw[7]) with its dμ/ds and tangent, slot by slot
-                p = _new_object(_LateBP)
-                p._stab, p._lv = raw[7], None
-                p.s, p.eq, p.force, p.k, p.st, p.mu = float(s), eq, float(force), k, None, mu
-                p.dmu = rate if self.mask is not None and _analytic_rate else None
-                p.tan, p.hist = tan, None
+                p = _LateBP.with_tangent(s, eq, force, k, mu, raw[7],
+                                         rate if self.mask is not None and _analytic_rate else None, tan)
             else:
                 lam = float(ev[-1]) if ev.size else -np.inf  # (ascending: _max_eig)
                 p = _BP(s, eq, force, k, None, mu, lam)
