@@ -1352,7 +1352,10 @@ def bench_map_rate(n: int, repeats: int, backends=("serial", "local", "dask"), w
 
     Per backend and model: ``poses_per_s`` (wall, best of ``repeats``, workers' start-up included),
     ``poses_per_cpu_s`` (CPU of this process and its workers), and the marginal cost of a pose
-    from the maps of ``n`` and ``n // 4`` poses differenced (start-up cancels): ``marginal_poses_per_s``
+    from the maps of ``n`` and ``n // 4`` poses differenced (start-up cancels; the short map has
+    at least ``maps.JIT_MIN_POSES`` poses where ``n`` allows it, so both maps take the same
+    arithmetic: below that size fresh Dask workers skip the compiled kernels and their 1–2 s
+    import, which would otherwise land in the difference): ``marginal_poses_per_s``
     (wall) and ``jacobian_evals_per_pose`` = marginal CPU per pose / CPU of one
     ``pin.computeFrameJacobian``, timed in this process between the runs (interleaved). Wall times
     on a shared machine are inflated by the other load; the CPU ratios much less (say the load)."""
@@ -1360,7 +1363,7 @@ def bench_map_rate(n: int, repeats: int, backends=("serial", "local", "dask"), w
 
     try:
         from vjm_pin.analysis.batched import BatchedChain
-        from vjm_pin.analysis.maps import run_map, sample_poses
+        from vjm_pin.analysis.maps import JIT_MIN_POSES, run_map, sample_poses
         from vjm_pin.model.robots import build_robot
     except ImportError as e:
         return {"skipped": str(e)}
@@ -1371,6 +1374,7 @@ def bench_map_rate(n: int, repeats: int, backends=("serial", "local", "dask"), w
         try:
             vm = make()
             n = sizes[label]
+            short = max(1, n // 4) if n < 2 * JIT_MIN_POSES else max(n // 4, JIT_MIN_POSES)
             names, poses = sample_poses(vm, n, seed=0)
             xs = BatchedChain(vm)._start(names, poses[:16])[0]
             run_map(vm, names, poses, w, backend="serial")  # warm: imports, kernels compiled or loaded
@@ -1378,7 +1382,7 @@ def bench_map_rate(n: int, repeats: int, backends=("serial", "local", "dask"), w
             for b in backends:
                 runs = {}
                 for _ in range(repeats):
-                    for m in (max(1, n // 4), n):
+                    for m in (short, n):
                         jac = _frame_jacobian_cpu_s(vm, xs)
                         c0, t0 = _map_cpu_s(), time.perf_counter()
                         res = run_map(vm, names, poses[:m], w, backend=b, workers=1 if b == "serial" else workers)
@@ -1386,13 +1390,14 @@ def bench_map_rate(n: int, repeats: int, backends=("serial", "local", "dask"), w
                         best = runs.get(m)
                         if best is None or wall < best["wall"]:
                             runs[m] = {"wall": wall, "cpu": cpu, "jac": jac, "ok": int(np.sum(res.status == "ok"))}
-                small, big = runs[max(1, n // 4)], runs[n]
-                dm = n - max(1, n // 4)
+                small, big = runs[short], runs[n]
+                dm = n - short
                 marg_cpu = max(big["cpu"] - small["cpu"], 1e-12) / dm
                 marg_wall = max(big["wall"] - small["wall"], 1e-12) / dm
                 jac = min(small["jac"], big["jac"])
                 rows[b] = {
                     "poses": n,
+                    "short_poses": short,
                     "poses_per_s": n / big["wall"],
                     "poses_per_cpu_s": n / big["cpu"],
                     "marginal_poses_per_s": 1.0 / marg_wall,
@@ -1649,7 +1654,7 @@ def format_map_rate(mp: dict | None) -> list[str]:
             continue
         for b, m in rows.items():
             lines.append(
-                f"    {label}, {b}, {m['poses']} poses: {m['poses_per_s']:.0f} poses/s wall (marginal {m['marginal_poses_per_s']:.0f}/s, "
+                f"    {label}, {b}, {m['poses']} poses: {m['poses_per_s']:.0f} poses/s wall (marginal vs {m.get('short_poses', '?')} poses {m['marginal_poses_per_s']:.0f}/s, "
                 f"start {m['start_s']:.1f} s), {m['poses_per_cpu_s']:.0f} poses per CPU-second; marginal "
                 f"{m['marginal_cpu_per_pose_s'] * 1e6:.1f} µs CPU = {m['jacobian_evals_per_pose']:.1f} frame-Jacobian evaluations "
                 f"({m['frame_jacobian_s'] * 1e6:.2f} µs) per pose (target <= 30: {'MET' if m['jacobian_evals_per_pose'] <= 30 else 'NOT MET'})"
