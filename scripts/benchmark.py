@@ -1344,7 +1344,49 @@ def _frame_jacobian_cpu_s(vm: VjmModel, xs: np.ndarray, number: int = 2000) -> f
     return best
 
 
-def bench_map_rate(n: int, repeats: int, backends=("serial", "local", "dask"), workers: int = 2, n_link: int | None = None) -> dict:
+@contextlib.contextmanager
+def _dask_cluster(workers: int):
+    """A local Dask cluster of ``workers`` processes (one thread each, no statistical profiler, as
+    the map's own) kept for several maps, and a function returning the CPU seconds of this process
+    (client, scheduler) plus its workers' so far: yields ``(address, cpu)``. For the per-pose
+    marginal cost on Dask without the workers' start-up (1–2 s of CPU each, which varies by
+    several tenths of a second from one start to the next) in the difference."""
+    import logging
+    import os
+    import resource
+
+    from distributed import Client, LocalCluster
+
+    old = os.environ.get("DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED")
+    os.environ["DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED"] = "False"
+    try:
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0",
+                               silence_logs=logging.ERROR)
+    finally:
+        if old is None:
+            os.environ.pop("DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED", None)
+        else:
+            os.environ["DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED"] = old
+    client = Client(cluster)
+
+    def _worker_cpu():
+        r = resource.getrusage(resource.RUSAGE_SELF)
+        return r.ru_utime + r.ru_stime
+
+    def cpu() -> float:
+        a = resource.getrusage(resource.RUSAGE_SELF)
+        return a.ru_utime + a.ru_stime + sum(client.run(_worker_cpu).values())
+
+    try:
+        yield cluster.scheduler_address, cpu
+    finally:
+        with contextlib.suppress(Exception):
+            client.close(timeout=5)
+        with contextlib.suppress(Exception):
+            cluster.close(timeout=5)
+
+
+def bench_map_rate(n: int, repeats: int, backends=("serial", "local", "dask", "dask cluster"), workers: int = 2, n_link: int | None = None) -> dict:
     """Map throughput of ``run_map`` (the map as users run it: batched lockstep poses, compiled
     kernels from ``maps.JIT_MIN_POSES`` poses on), ur5 with actuator springs and with 6-D link
     springs (``n_link`` poses, default ``n // 3``), loaded by 100 N along −z, on each backend with
@@ -1358,7 +1400,13 @@ def bench_map_rate(n: int, repeats: int, backends=("serial", "local", "dask"), w
     import, which would otherwise land in the difference): ``marginal_poses_per_s``
     (wall) and ``jacobian_evals_per_pose`` = marginal CPU per pose / CPU of one
     ``pin.computeFrameJacobian``, timed in this process between the runs (interleaved). Wall times
-    on a shared machine are inflated by the other load; the CPU ratios much less (say the load)."""
+    on a shared machine are inflated by the other load; the CPU ratios much less (say the load).
+
+    ``dask`` starts a local cluster for each map (as ``run_map`` does without a scheduler), so its
+    marginal cost carries the scatter of two workers' start-ups (±0.3 s of CPU over a few thousand
+    poses: tens of evaluations per pose); ``dask cluster`` runs the maps on one running local
+    cluster (``run_map(..., scheduler=address)``, as on a user's cluster; warmed by one map first)
+    and counts this process's CPU and the workers' own (``client.run``): the per-pose cost on Dask."""
     import os
 
     try:
@@ -1381,27 +1429,34 @@ def bench_map_rate(n: int, repeats: int, backends=("serial", "local", "dask"), w
             rows = {}
             for b in backends:
                 runs = {}
-                for _ in range(repeats):
-                    for m in (short, n):
-                        jac = _frame_jacobian_cpu_s(vm, xs)
-                        c0, t0 = _map_cpu_s(), time.perf_counter()
-                        res = run_map(vm, names, poses[:m], w, backend=b, workers=1 if b == "serial" else workers)
-                        wall, cpu = time.perf_counter() - t0, _map_cpu_s() - c0
-                        best = runs.get(m)
-                        if best is None or wall < best["wall"]:
-                            runs[m] = {"wall": wall, "cpu": cpu, "jac": jac, "ok": int(np.sum(res.status == "ok"))}
+                with _dask_cluster(workers) if b == "dask cluster" else contextlib.nullcontext((None, _map_cpu_s)) as (
+                    address,
+                    cpu_s,
+                ):
+                    kw = {"backend": "dask", "scheduler": address} if address else {"backend": b}
+                    if address:  # warm the workers: model, kernels
+                        run_map(vm, names, poses[:short], w, workers=workers, **kw)
+                    for _ in range(repeats):
+                        for m in (short, n):
+                            jac = _frame_jacobian_cpu_s(vm, xs)
+                            c0, t0 = cpu_s(), time.perf_counter()
+                            res = run_map(vm, names, poses[:m], w, workers=1 if b == "serial" else workers, **kw)
+                            wall, cpu = time.perf_counter() - t0, cpu_s() - c0
+                            best = runs.get(m)
+                            if best is None or wall < best["wall"]:
+                                runs[m] = {"wall": wall, "cpu": cpu, "jac": jac, "ok": int(np.sum(res.status == "ok"))}
                 small, big = runs[short], runs[n]
                 dm = n - short
                 marg_cpu = max(big["cpu"] - small["cpu"], 1e-12) / dm
-                marg_wall = max(big["wall"] - small["wall"], 1e-12) / dm
+                marg_wall = (big["wall"] - small["wall"]) / dm  # ≤ 0: lost in the start-up's scatter
                 jac = min(small["jac"], big["jac"])
                 rows[b] = {
                     "poses": n,
                     "short_poses": short,
                     "poses_per_s": n / big["wall"],
                     "poses_per_cpu_s": n / big["cpu"],
-                    "marginal_poses_per_s": 1.0 / marg_wall,
-                    "start_s": max(big["wall"] - n * marg_wall, 0.0),
+                    "marginal_poses_per_s": 1.0 / marg_wall if marg_wall > 0 else None,
+                    "start_s": max(big["wall"] - n * max(marg_wall, 0.0), 0.0),
                     "marginal_cpu_per_pose_s": marg_cpu,
                     "frame_jacobian_s": jac,
                     "jacobian_evals_per_pose": marg_cpu / jac,
@@ -1632,11 +1687,17 @@ def run_issue14(quick: bool = False, repeats: int = 5, orthoglide: bool = True) 
         "k": k8["k"],
     }
     out["import"] = bench_import_wall(2 if quick else repeats)
-    out["map"] = bench_map_rate(40 if quick else 20000, 1 if quick else 2, backends=("serial",) if quick else ("serial", "local", "dask"))
+    out["map"] = bench_map_rate(40 if quick else 20000, 1 if quick else 2, backends=("serial",) if quick else ("serial", "local", "dask", "dask cluster"))
     out["opensees_k8"] = bench_opensees_same_accuracy(8, repeats=1 if quick else max(3, reps))
     out["chain_algebra"] = bench_chain_algebra((1, 2, 4, 8) if quick else (1, 2, 4, 8, 16, 32, 64), repeats=2 if quick else reps)
     out["orthoglide_table"] = bench_orthoglide_table(quick) if orthoglide else {"skipped": "not asked for (--no-orthoglide-table)"}
     return out
+
+
+_MAP_BACKEND_LABEL = {
+    "dask": "dask (a local cluster started per map)",
+    "dask cluster": "dask (one running local cluster, its workers warm)",
+}
 
 
 def format_map_rate(mp: dict | None) -> list[str]:
@@ -1654,7 +1715,8 @@ def format_map_rate(mp: dict | None) -> list[str]:
             continue
         for b, m in rows.items():
             lines.append(
-                f"    {label}, {b}, {m['poses']} poses: {m['poses_per_s']:.0f} poses/s wall (marginal vs {m.get('short_poses', '?')} poses {m['marginal_poses_per_s']:.0f}/s, "
+                f"    {label}, {_MAP_BACKEND_LABEL.get(b, b)}, {m['poses']} poses: {m['poses_per_s']:.0f} poses/s wall (marginal vs {m.get('short_poses', '?')} poses "
+                f"{format(m['marginal_poses_per_s'], '.0f') + '/s' if m['marginal_poses_per_s'] else 'lost in the start-up scatter'}, "
                 f"start {m['start_s']:.1f} s), {m['poses_per_cpu_s']:.0f} poses per CPU-second; marginal "
                 f"{m['marginal_cpu_per_pose_s'] * 1e6:.1f} µs CPU = {m['jacobian_evals_per_pose']:.1f} frame-Jacobian evaluations "
                 f"({m['frame_jacobian_s'] * 1e6:.2f} µs) per pose (target <= 30: {'MET' if m['jacobian_evals_per_pose'] <= 30 else 'NOT MET'})"
