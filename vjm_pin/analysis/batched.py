@@ -14,12 +14,18 @@ each kept only if it halves the residual and stays within the step limit, then u
   (:func:`vjm_pin.kinematics.screw.psi_hessian_screw`) for all poses as stacked matrix products;
 - the Newton steps ``(K_θ − H) Δθ = −r`` of eq. (5) with one stacked ``np.linalg.solve``;
 - or, for maps of many poses, all of one iteration's algebra after the Pinocchio call (residual,
-  convergence test, ``K − H``, Cholesky step, and at convergence ``C`` from the same factor) in one
-  compiled kernel (:func:`kernel`, numba; the numpy twin above is its reference, equal to
-  rounding, ``tests/test_map_batched.py``). Why numba: as :mod:`vjm_pin.solver.kernel` (no
-  compiler at install time, a pure-numpy fallback, machine code cached on disk);
+  convergence test, ``K − H``, Cholesky step, at convergence ``C`` from the same factor, and where
+  the pose may finish the stability verdict below) in one compiled kernel (:func:`kernel`, numba;
+  the numpy twin above is its reference, equal to rounding, ``tests/test_map_batched.py``), pose
+  by pose with ``K − H`` in a scratch matrix and its results written in place into the block's
+  rows (no (P, n, n) temporaries: blocks of :data:`BLOCK_JIT` poses). Its sums are taken in a fixed
+  order (independent ones side by side, ``tests/test_batched_speed_paths.py``), so its numbers do
+  not depend on the block or on how the loops are scheduled. Why numba: as
+  :mod:`vjm_pin.solver.kernel` (no compiler at install time, a pure-numpy fallback, machine code
+  cached on disk);
 - the start of each pose (joint values, θ₀), the scale ``L_c`` of prismatic coordinates (the joint
-  origins by stacked forward kinematics, :meth:`BatchedChain.joint_origins`) and the deflection
+  origins by stacked forward kinematics, :meth:`BatchedChain.joint_origins`, or its compiled twin
+  :func:`_origins_loops` with the kernel: the same numbers) and the deflection
   ``(p − p₀, log3(R R₀ᵀ))`` (:func:`log3_stacked`) on stacked arrays.
 
 At the equilibrium the indices of :mod:`vjm_pin.analysis.maps` follow from the loaded compliance
@@ -75,6 +81,10 @@ MAX_COND = 1e8
 BLOCK_ENTRIES = 200_000
 BLOCK_MIN = 64
 BLOCK_MAX = 512
+#: Poses solved together with the compiled kernel, whatever n: it keeps ``K − H`` of one pose at a
+#: time in a scratch matrix (only a finishing pose's goes to the block's (P, n, n) array), so the
+#: block is sized for the interpreter's cost per block alone. Numbers do not depend on it.
+BLOCK_JIT = 512
 #: Rotations of the deflection above this angle (rad) go through ``pin.log3`` one by one (near π
 #: the stacked formula loses digits).
 LOG3_STACKED_MAX = 3.0
@@ -107,6 +117,7 @@ class BatchedChain:
         self.fid = vm.frame_id
         nv = model.nv
         self.free = np.asarray(vm.theta_idx, int)
+        self.free_i8 = np.ascontiguousarray(self.free, np.int64)
         self.all_free = bool(np.array_equal(self.free, np.arange(nv)))
         self.task = np.asarray(vm.task, int)
         self.K = np.ascontiguousarray(vm.K_theta, float)
@@ -188,13 +199,70 @@ class BatchedChain:
             out[:, idx] = pos[a][:, None, :] + (c.T[None] if ra is None else np.swapaxes(_mm(ra, c), 1, 2))
         return out
 
+    def _origin_arrays(self, names):
+        """:meth:`_origin_plan` as the arrays of :func:`_origins_loops` (cached with the plan)."""
+        key = ("arrays", tuple(names))
+        arrays = self._plans.get(key)
+        if arrays is not None:
+            return arrays
+        steps, groups = self._origin_plan(names)
+        ns = len(steps)
+        slot = {0: 0}
+        anchor = np.zeros(ns, np.int64)
+        for s, (j, a, *_) in enumerate(steps):
+            anchor[s] = slot[a]
+            slot[j] = s + 1
+        kmat, kk = np.zeros((ns, 3, 3)), np.zeros((ns, 3, 3))
+        for s, st in enumerate(steps):
+            if not st[5]:
+                kmat[s] = _skew(st[4])
+                kk[s] = kmat[s] @ kmat[s]  # as _rotations
+        g_idx = [i for _, idx, _ in groups for i in idx]
+        arrays = (
+            anchor,
+            np.array([st[2] for st in steps]).reshape(ns, 3, 3),
+            np.array([st[3] for st in steps]).reshape(ns, 3),
+            np.array([st[4] for st in steps]).reshape(ns, 3),
+            np.array([st[5] for st in steps], bool),
+            np.array([st[0] - 1 for st in steps], np.int64),
+            kmat,
+            kk,
+            np.array([slot[a] for a, _, _ in groups], np.int64),
+            np.cumsum([0] + [len(idx) for _, idx, _ in groups]).astype(np.int64),
+            np.array(g_idx, np.int64),
+            np.concatenate([c.T for _, _, c in groups]).reshape(len(g_idx), 3) if groups else np.zeros((0, 3)),
+            [st[6] for st in steps],
+        )
+        self._plans[key] = arrays
+        return arrays
+
+    def _joint_origins_jit(self, names, poses: np.ndarray) -> np.ndarray:
+        """:meth:`joint_origins` by the compiled :func:`_origins_loops`: the same numbers (the
+        same products and sums in the same order; the sines and cosines by numpy, as there)."""
+        anchor, rp, tp, axis, pr, jidx, kmat, kk, g_anchor, g_start, g_idx, g_c, cols = self._origin_arrays(names)
+        p = poses.shape[0]
+        q = np.empty((len(cols), p))
+        sn = np.zeros((len(cols), p))
+        cs = np.zeros((len(cols), p))
+        for s, c in enumerate(cols):
+            v = poses[:, c]  # the strided column, as joint_origins passes it to _rotations
+            if pr[s]:
+                q[s] = v
+            else:
+                sn[s], cs[s] = np.sin(v), np.cos(v)
+        out = np.empty((p, self.model.njoints - 1, 3))
+        kernel()  # loads _ORIGINS with the kernel (a fresh worker may not have yet)
+        _ORIGINS(anchor, rp, tp, axis, pr, jidx, kmat, kk, q, sn, cs, g_anchor, g_start, g_idx, g_c, out)
+        return out
+
     def _var_scale(self, names, poses: np.ndarray, p0: np.ndarray) -> np.ndarray:
         """(P, n) ``EquilibriumSolver.var_scale`` at the reference of each pose, whose end position
         is ``p0``: prismatic coordinates by the size ``L_c`` of the chain (largest distance of a
         joint origin from the end, at least 1 mm), revolute ones by 1."""
         if not self.prism.any():
             return np.ones((poses.shape[0], len(self.free)))
-        d = self.joint_origins(names, poses) - p0[:, None, :]
+        origins = self._joint_origins_jit(names, poses) if self.jit else self.joint_origins(names, poses)
+        d = origins - p0[:, None, :]
         lc = np.maximum(np.sqrt((d * d).sum(axis=2)).max(axis=1), 1e-3)
         return np.where(self.prism[None, :], lc[:, None], 1.0)
 
@@ -226,17 +294,30 @@ class BatchedChain:
                 th0[:, k] = poses[:, c]
         return x, th0
 
+    def _evaluate_into(self, x: np.ndarray, rows: np.ndarray, jac: np.ndarray, hom: np.ndarray) -> None:
+        """:meth:`_evaluate` at the configurations ``x[rows]`` into the rows ``rows`` of ``jac``
+        (P, 6, nv: all columns) and ``hom`` (P, 4, 4): the same Pinocchio calls, without the
+        stacked copies."""
+        model, fid = self.model, self.fid
+        data = data_for(model)
+        cfj, lwa = pin.computeFrameJacobian, pin.LOCAL_WORLD_ALIGNED
+        omf = data.oMf[fid]  # a reference to the placement in data, which each call updates
+        for k in rows.tolist():
+            jac[k] = cfj(model, data, x[k], fid, lwa)  # also sets data.oMf[fid]
+            hom[k] = omf.homogeneous
+
     def _evaluate(self, xa: np.ndarray):
         """(A, 6, n) end-frame Jacobians (``LOCAL_WORLD_ALIGNED``, free columns) and (A, 4, 4) end
         placements at the configurations ``xa``: one Pinocchio call per pose."""
         model, fid = self.model, self.fid
         data = data_for(model)
-        cfj, lwa, omf = pin.computeFrameJacobian, pin.LOCAL_WORLD_ALIGNED, data.oMf
+        cfj, lwa = pin.computeFrameJacobian, pin.LOCAL_WORLD_ALIGNED
+        omf = data.oMf[fid]  # a reference to the placement in data, which each call updates
         ja = np.empty((xa.shape[0], 6, model.nv))
         ha = np.empty((xa.shape[0], 4, 4))
         for k, xi in enumerate(xa):
             ja[k] = cfj(model, data, xi, fid, lwa)  # also sets data.oMf[fid]
-            ha[k] = omf[fid].homogeneous
+            ha[k] = omf.homogeneous
         return (ja if self.all_free else ja[:, :, self.free]), ha
 
     def solve_arrays(self, names, poses: np.ndarray, wrench: np.ndarray):
@@ -251,7 +332,7 @@ class BatchedChain:
         """
         poses = np.asarray(poses, float)
         n = len(self.free)
-        block = max(BLOCK_MIN, min(BLOCK_MAX, BLOCK_ENTRIES // max(n * n, 1)))
+        block = BLOCK_JIT if self.jit else max(BLOCK_MIN, min(BLOCK_MAX, BLOCK_ENTRIES // max(n * n, 1)))
         if poses.shape[0] > block:  # blocks whose (P, n, n) temporaries stay in cache
             parts = [self.solve_arrays(names, poses[i : i + block], wrench) for i in range(0, poses.shape[0], block)]
             return tuple(np.concatenate(a) for a in zip(*parts))
@@ -259,7 +340,7 @@ class BatchedChain:
         w = np.asarray(wrench, float)
         ti = self.free
         x, th0 = self._start(names, poses)
-        jac = np.empty((npose, 6, n))
+        jac = np.empty((npose, 6, self.model.nv))  # all columns (_free_columns: the free ones)
         hom = np.empty((npose, 4, 4))
         p0 = np.empty((npose, 3))
         var = np.ones((npose, n))
@@ -269,19 +350,23 @@ class BatchedChain:
         amat = np.empty((npose, n, n))
         csol = np.empty((npose, len(self.task), len(self.task)))  # C at the equilibrium, when solved
         have_x = np.zeros(npose, bool)
+        clear = np.zeros(npose, bool) if self.jit else None  # the compiled kernel's stability verdicts
         active = np.arange(npose)
         it = 0
         while active.size:
-            ja, ha = self._evaluate(x[active])
-            jac[active], hom[active] = ja, ha
+            self._evaluate_into(x, active, jac, hom)
             if it == 0:  # x is the unloaded reference: its end placement is p0, R0
-                p0[:] = ha[:, :3, 3]
-                r0 = ha[:, :3, :3].copy()
+                p0[:] = hom[:, :3, 3]
+                r0 = hom[:, :3, :3].copy()
                 var = self._var_scale(names, poses, p0)
             # the residual r = K(θ − θ₀) − Jᵀw (eq. 5), its convergence test, K − H and the Newton
             # step; where converged (a candidate to finish) also C = J (K − H)⁻¹ Jᵀ for the
             # indices, from the same factorisation
-            r, rs, stat, conv, wm, dx, xa = self._system(ja, x[active][:, ti] - th0[active], w)
+            dth = x[active][:, ti] - th0[active]
+            if self.jit:  # C, the verdict and K − H straight into the rows ``active`` of csol, clear, amat
+                r, rs, stat, conv, dx = self._system_jit(jac, dth, var[active], w, active, amat, csol, clear)
+            else:
+                r, rs, stat, conv, wm, dx, xa = self._system(self._free_columns(jac[active]), dth, w)
             conv0 = conv
             finite = np.all(np.isfinite(dx), axis=1)
             step = np.abs(dx / var[active]).max(axis=1)
@@ -302,13 +387,34 @@ class BatchedChain:
             flush_tiny(xs)
             x[idx] = xs
             done[active[finish]] = True
-            amat[active[finish]] = wm[finish]  # K − H at the equilibrium, for the indices
             fx = finish & conv0
-            csol[active[fx]] = xa[fx]
+            if not self.jit:
+                amat[active[finish]] = wm[finish]  # K − H at the equilibrium, for the indices
+                csol[active[fx]] = xa[fx]
             have_x[active[fx]] = True
             active = idx
             it += 1
-        return self._indices(done, jac, hom, amat, csol, have_x, p0, r0, w)
+        return self._indices(done, jac, hom, amat, csol, have_x, p0, r0, w, clear)
+
+    def _free_columns(self, ja: np.ndarray) -> np.ndarray:
+        """The free columns (the variables θ) of the stacked (A, 6, nv) Jacobians ``ja``."""
+        return ja if self.all_free else ja[:, :, self.free]
+
+    def _system_jit(self, jac, dth, var, w, rows, amat, csol, clear):
+        """:meth:`_system` by the compiled kernel (:func:`kernel`) for the Jacobians ``jac[rows]``
+        (the block's (P, 6, nv), all columns) at the variable scales ``var`` (A, n): (r, |r|∞,
+        scale, converged, step). For the indices, ``C`` of the converged poses and, of the poses
+        that may finish now, the stability verdict of :meth:`_indices` and (not converged)
+        ``K − H`` go to the rows ``rows`` of ``csol`` (P, m, m), ``clear`` (P,) and ``amat``
+        (P, n, n) (:func:`_system_loops`)."""
+        a, n = len(rows), len(self.free)
+        out = (np.empty((a, n)), np.empty(a), np.empty(a), np.empty(a, bool), np.empty((a, n)))
+        f, mo = w[:3], w[3:]
+        sym = self.k_symmetric and not np.any(mo)
+        kernel()(jac, self.free_i8, np.ascontiguousarray(dth), np.ascontiguousarray(var), self.K, w[self.task], TOL,
+                 1e-6 * self.kscale, _skew_t(f), _skew_t(mo), bool(np.any(mo)), sym, self.mask, self.task, POLISH_STEP,
+                 STABLE_MARGIN * self.knorm, np.ascontiguousarray(rows, np.int64), *out, amat, csol, clear)  # fmt: skip
+        return out
 
     def _system(self, ja, dth, w):
         """One Newton iteration's algebra for the stacked (A, 6, n) Jacobians ``ja`` at the spring
@@ -316,19 +422,12 @@ class BatchedChain:
         ``r = K dθ − J_tᵀ w_t`` (eq. 5), ``|r|∞``, its scale ``max(|K dθ|∞, |J_tᵀ w_t|∞, 1e-6 max|K|)``,
         the convergence test ``|r|∞ ≤ TOL · scale``, ``K − H`` (A, n, n), the Newton step
         ``−(K − H)⁻¹ r`` (A, n; NaN where ``K − H`` is singular) and, where converged, the task
-        compliance ``C = J_t (K − H)⁻¹ J_tᵀ`` (A, m, m): by the compiled kernel (:func:`kernel`) or
-        its numpy twin (the same operations in the same order up to the factorisation: Cholesky in
-        the kernel when ``K − H`` is symmetric positive definite, LU in the twin)."""
+        compliance ``C = J_t (K − H)⁻¹ J_tᵀ`` (A, m, m): the numpy twin of the compiled kernel
+        (:meth:`_system_jit`; the same operations in the same order up to the factorisation:
+        Cholesky in the kernel when ``K − H`` is symmetric positive definite, LU in the twin)."""
         a, n, m = ja.shape[0], ja.shape[2], len(self.task)
         wt = w[self.task]
         floor = 1e-6 * self.kscale
-        if self.jit:
-            out = (np.empty((a, n)), np.empty(a), np.empty(a), np.empty(a, bool), np.empty((a, n, n)), np.empty((a, n)),
-                   np.empty((a, m, m)))  # fmt: skip
-            f, mo = w[:3], w[3:]
-            kernel()(np.ascontiguousarray(ja), np.ascontiguousarray(dth), self.K, wt, TOL, floor, _skew_t(f), _skew_t(mo),
-                     bool(np.any(mo)), self.k_symmetric and not np.any(mo), self.mask, self.task, *out)  # fmt: skip
-            return out
         jt = ja[:, self.task]  # (A, m, n) task rows
         tau = _mm(self.K, dth[:, :, None])[:, :, 0]
         load_g = _mm(wt[None, None, :], jt)[:, 0, :]
@@ -353,7 +452,7 @@ class BatchedChain:
                     cm[sel] = _mm(jt[sel], sol[:, :, 1:])
         return r, rs, stat, conv, wm, dx, cm
 
-    def _indices(self, done, jac, hom, amat, csol, have_x, p0, r0, w):
+    def _indices(self, done, jac, hom, amat, csol, have_x, p0, r0, w, clear_jit=None):
         npose = len(done)
         keep = np.zeros(npose, bool)
         defl = np.full((npose, 6), np.nan)
@@ -363,25 +462,24 @@ class BatchedChain:
         ok = np.flatnonzero(done)
         if not ok.size or not tt:
             return keep, p0, defl, k_along, k_min
-        ja = jac[ok]
-        a = amat[ok]
         # H is symmetric under a force alone (screw form: both triangles from the same products)
         sym = self.k_symmetric and not np.any(w[3:])
         tau = STABLE_MARGIN * self.knorm
-        if self.jit:
-            clear = np.empty(len(ok), bool)
-            _KERNEL_CLEAR(a, tau, sym, clear)
+        if clear_jit is not None:  # the compiled kernel's verdicts at the finishing iteration
+            clear = clear_jit[ok]
         else:
+            a = amat[ok]
             sa = a.copy() if sym else 0.5 * (a + np.swapaxes(a, 1, 2))
             diag = np.arange(a.shape[1])
             sa[:, diag, diag] -= tau
             clear = _positive_definite(sa)
-        jt = ja[:, self.task]
         with np.errstate(all="ignore"):
             c = csol[ok]
             late = ~have_x[ok]  # converged by a negligible step alone: not solved yet
             if late.any():
-                c[late] = _mm(jt[late], np.stack([_solve_or_nan(aa, jj.T) for aa, jj in zip(a[late], jt[late])]))
+                al = amat[ok[late]]
+                jt = self._free_columns(jac[ok[late]])[:, self.task]
+                c[late] = _mm(jt, np.stack([_solve_or_nan(aa, jj.T) for aa, jj in zip(al, jt)]))
             finite = np.all(np.isfinite(c), axis=(1, 2))
             c[~finite] = np.eye(c.shape[1])
             keep_ok = clear & finite & (_equilibrated_cond(c) < MAX_COND)
@@ -433,9 +531,14 @@ def _mm(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return acc
 
 
+def _skew(axis: np.ndarray) -> np.ndarray:
+    """``[axis]×`` (3, 3)."""
+    return np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+
+
 def _rotations(axis: np.ndarray, q: np.ndarray) -> np.ndarray:
     """(P, 3, 3) rotations by the angles ``q`` (P,) about the unit ``axis`` (Rodrigues)."""
-    k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+    k = _skew(axis)
     return np.eye(3) + np.sin(q)[:, None, None] * k + (1.0 - np.cos(q))[:, None, None] * (k @ k)
 
 
@@ -501,59 +604,161 @@ def _skew_t(v) -> np.ndarray:
 
 def _cholesky_loops(a, shift, lo):  # pragma: no cover - compiled
     """Lower Cholesky factor of ``a − shift·I`` (symmetric, lower triangle read) into ``lo``;
-    False when it is not positive definite."""
+    False when it is not positive definite.
+
+    Each entry is ``(a_ij − Σ_{k<j} l_ik l_jk) / l_jj``, the terms subtracted one by one in
+    ascending k (the diagonal ``√(a_jj − shift − Σ l_jk²)``); the entries below a diagonal are
+    taken four rows at a time, four independent sums side by side sharing the loads of row j
+    (the same numbers as one row at a time, less waiting on each subtraction)."""
     n = a.shape[0]
     for j in range(n):
+        lj = lo[j]
         s = a[j, j] - shift
         for k in range(j):
-            s -= lo[j, k] * lo[j, k]
+            s -= lj[k] * lj[k]
         if not s > 0.0:
             return False
         dj = np.sqrt(s)
-        lo[j, j] = dj
-        for i in range(j + 1, n):
+        lj[j] = dj
+        i = j + 1
+        while i + 3 < n:
+            l0 = lo[i]
+            l1 = lo[i + 1]
+            l2 = lo[i + 2]
+            l3 = lo[i + 3]
+            t0 = a[i, j]
+            t1 = a[i + 1, j]
+            t2 = a[i + 2, j]
+            t3 = a[i + 3, j]
+            for k in range(j):
+                c = lj[k]
+                t0 -= l0[k] * c
+                t1 -= l1[k] * c
+                t2 -= l2[k] * c
+                t3 -= l3[k] * c
+            l0[j] = t0 / dj
+            l1[j] = t1 / dj
+            l2[j] = t2 / dj
+            l3[j] = t3 / dj
+            i += 4
+        while i < n:
+            li = lo[i]
             t = a[i, j]
             for k in range(j):
-                t -= lo[i, k] * lo[j, k]
-            lo[i, j] = t / dj
+                t -= li[k] * lj[k]
+            li[j] = t / dj
+            i += 1
     return True
 
 
-def _clear_loops(a, tau, sym, out):  # pragma: no cover - compiled
-    """The compiled :func:`_positive_definite` of ``sym(a) − τ I`` for the stacked ``a`` (the lower
-    triangle of ``a`` itself when ``sym``)."""
-    npose, n, _ = a.shape
-    s = np.empty((n, n))
-    lo = np.zeros((n, n))
-    for p in range(npose):
+def _forward_loops(lo, y, c0, nc):  # pragma: no cover - compiled
+    """``L y_c = b_c`` in place for the rows ``c0 .. c0 + nc − 1`` (nc ≤ 4) of ``y`` (right-hand
+    sides in, solutions out): ``y_ci = (b_ci − Σ_{k<i} l_ik y_ck) / l_ii``, the terms subtracted one
+    by one in ascending k, the columns side by side sharing the loads of row i of ``L``."""
+    n = lo.shape[0]
+    y0 = y[c0]
+    if nc == 1:
         for i in range(n):
-            for j in range(i + 1):
-                s[i, j] = a[p, i, j] if sym else 0.5 * (a[p, i, j] + a[p, j, i])
-        out[p] = _cholesky_loops(s, tau, lo)
+            li = lo[i]
+            t = y0[i]
+            for k in range(i):
+                t -= li[k] * y0[k]
+            y0[i] = t / li[i]
+        return
+    y1 = y[c0 + 1] if nc > 1 else y0
+    y2 = y[c0 + 2] if nc > 2 else y0
+    y3 = y[c0 + 3] if nc > 3 else y0
+    for i in range(n):
+        li = lo[i]
+        t0 = y0[i]
+        t1 = y1[i]
+        t2 = y2[i]
+        t3 = y3[i]
+        for k in range(i):
+            c = li[k]
+            t0 -= c * y0[k]
+            t1 -= c * y1[k]
+            t2 -= c * y2[k]
+            t3 -= c * y3[k]
+        d = li[i]
+        if nc > 3:
+            y3[i] = t3 / d
+        if nc > 2:
+            y2[i] = t2 / d
+        if nc > 1:
+            y1[i] = t1 / d
+        y0[i] = t0 / d
 
 
-def _system_loops(ja, dth, K, wt, tol, floor, sf, sm, moment, sym, mask, task, r, rs, stat, conv, wm, dx, cm):  # pragma: no cover - compiled
+def _system_loops(  # pragma: no cover - compiled
+    ja, free, dth, var, K, wt, tol, floor, sf, sm, moment, sym, mask, task, polish_step, tau, rows,
+    r, rs, stat, conv, dx, amat, csol, clear,
+):  # fmt: skip
     """The compiled twin of :meth:`BatchedChain._system`, one pose at a time: the residual, its
     test and ``K − H`` by explicit loops (the same operations in the same order as the numpy
     twin); the step (and where converged ``C = J (K − H)⁻¹ Jᵀ = YᵀY``, ``Y = L⁻¹Jᵀ``) by a Cholesky
     factorisation ``LLᵀ`` when ``K − H`` is symmetric (a force alone) and positive definite, else
-    LAPACK ``dgesv`` (numba's ``np.linalg.solve``). A singular ``K − H`` gives NaN."""
-    npose, _, n = ja.shape
+    LAPACK ``dgesv`` (numba's ``np.linalg.solve``). A singular ``K − H`` gives NaN.
+
+    Pose ``p`` (of ``dth`` and ``var`` (A, n) and of the outputs ``r``, ``rs``, ``stat``, ``conv``,
+    ``dx``) is row ``rows[p]`` of the block's Jacobians ``ja`` (P, 6, nv; its columns ``free`` are
+    the variables) and of its ``amat`` (P, n, n), ``csol`` (P, m, m) and ``clear`` (P,). The kernel
+    leaves there ``C`` where converged; where the pose may finish in this iteration (converged, or
+    its residual within ``1e3 tol`` of its scale and its step ``max |dx / var|`` within
+    ``polish_step``, the looser test of :meth:`BatchedChain.solve_arrays`; here with margins, a
+    superset) the stability verdict of :meth:`BatchedChain._indices` (``sym(K − H) − τ I`` positive
+    definite, the Cholesky factorisation of :func:`_positive_definite`); and ``K − H`` itself where
+    it may finish unconverged (the indices then solve with it). ``K − H`` stays in a scratch matrix
+    otherwise.
+
+    Every number is a sum taken term by term in the order of the numpy twin (of the previous
+    kernel for the factorisations); sums independent of each other (the rows of ``K dθ`` and
+    ``J_tᵀ w_t``, the entries of ``K − H``, rows of ``L``, right-hand sides) are taken side by
+    side, which changes the schedule, not the numbers."""
+    npose = rows.shape[0]
+    n = free.shape[0]
     m = task.shape[0]
     d = np.empty((3, n))
     e = np.empty((3, n))
+    kt = np.empty((n, n))  # Kᵀ: column k of K as a contiguous row
+    for i in range(n):
+        for k in range(n):
+            kt[k, i] = K[i, k]
+    tv = np.empty(n)
+    gv = np.empty(n)
+    wm = np.empty((n, n))  # K − H of the pose
     lo = np.zeros((n, n))
+    yt = np.empty((1 + m, n))  # right-hand sides, then solutions, one per row
+    near = 1e4 * tol  # > the 1e3 tol of solve_arrays' looser test, whatever the rounding
+    s_clear = np.empty((n, n))
+    jp = np.empty((6, n))  # the pose's Jacobian, free columns
     for p in range(npose):
+        row = rows[p]
+        for c in range(6):
+            for j in range(n):
+                jp[c, j] = ja[row, c, free[j]]
+        d0 = dth[p, 0]
+        for i in range(n):
+            tv[i] = K[i, 0] * d0
+        for k in range(1, n):
+            dk = dth[p, k]
+            for i in range(n):
+                tv[i] = tv[i] + kt[k, i] * dk
+        w0 = wt[0]
+        t0 = task[0]
+        for i in range(n):
+            gv[i] = w0 * jp[t0, i]
+        for c in range(1, m):
+            wc = wt[c]
+            tc = task[c]
+            for i in range(n):
+                gv[i] = gv[i] + wc * jp[tc, i]
         big_t = 0.0
         big_l = 0.0
         big_r = 0.0
         for i in range(n):
-            t = K[i, 0] * dth[p, 0]
-            for k in range(1, n):
-                t = t + K[i, k] * dth[p, k]
-            g = wt[0] * ja[p, task[0], i]
-            for c in range(1, m):
-                g = g + wt[c] * ja[p, task[c], i]
+            t = tv[i]
+            g = gv[i]
             r[p, i] = t - g
             big_t = max(big_t, abs(t))
             big_l = max(big_l, abs(g))
@@ -563,66 +768,158 @@ def _system_loops(ja, dth, K, wt, tol, floor, sf, sm, moment, sym, mask, task, r
         conv[p] = big_r <= tol * stat[p]
         for k in range(3):
             for j in range(n):
-                d[k, j] = sf[k, 0] * ja[p, 0, j] + sf[k, 1] * ja[p, 1, j] + sf[k, 2] * ja[p, 2, j]
-                e[k, j] = sm[k, 0] * ja[p, 3, j] + sm[k, 1] * ja[p, 4, j] + sm[k, 2] * ja[p, 5, j]
-        for i in range(n):
-            for j in range(n):
-                if mask[i, j]:
-                    h = ja[p, 3, j] * d[0, i] + ja[p, 4, j] * d[1, i] + ja[p, 5, j] * d[2, i]
-                    if moment:
-                        h = h + (e[0, i] * ja[p, 3, j] + e[1, i] * ja[p, 4, j] + e[2, i] * ja[p, 5, j])
-                else:
-                    h = ja[p, 3, i] * d[0, j] + ja[p, 4, i] * d[1, j] + ja[p, 5, i] * d[2, j]
-                wm[p, i, j] = K[i, j] - h
+                d[k, j] = sf[k, 0] * jp[0, j] + sf[k, 1] * jp[1, j] + sf[k, 2] * jp[2, j]
+                e[k, j] = sm[k, 0] * jp[3, j] + sm[k, 1] * jp[4, j] + sm[k, 2] * jp[5, j]
+        if moment:
+            for i in range(n):
+                for j in range(n):
+                    if mask[i, j]:
+                        h = jp[3, j] * d[0, i] + jp[4, j] * d[1, i] + jp[5, j] * d[2, i]
+                        h = h + (e[0, i] * jp[3, j] + e[1, i] * jp[4, j] + e[2, i] * jp[5, j])
+                    else:
+                        h = jp[3, i] * d[0, j] + jp[4, i] * d[1, j] + jp[5, i] * d[2, j]
+                    wm[i, j] = K[i, j] - h
+        else:  # both products for every entry, then the masked choice: a loop that vectorises
+            for i in range(n):
+                di0 = d[0, i]
+                di1 = d[1, i]
+                di2 = d[2, i]
+                ji3 = jp[3, i]
+                ji4 = jp[4, i]
+                ji5 = jp[5, i]
+                for j in range(n):
+                    hm = jp[3, j] * di0 + jp[4, j] * di1 + jp[5, j] * di2
+                    hu = ji3 * d[0, j] + ji4 * d[1, j] + ji5 * d[2, j]
+                    wm[i, j] = K[i, j] - (hm if mask[i, j] else hu)
         nr = 1 + m if conv[p] else 1
-        rhs = np.empty((n, nr))
         for i in range(n):
-            rhs[i, 0] = -r[p, i]
-            for c in range(1, nr):
-                rhs[i, c] = ja[p, task[c - 1], i]
-        sol = np.full((n, nr), np.nan)
-        if sym and _cholesky_loops(wm[p], 0.0, lo):
-            for c in range(nr):  # L y = b; the step also Lᵀ x = y
-                for i in range(n):
-                    t = rhs[i, c]
-                    for k in range(i):
-                        t -= lo[i, k] * sol[k, c]
-                    sol[i, c] = t / lo[i, i]
-                if c == 0:
-                    for i in range(n - 1, -1, -1):
-                        t = sol[i, 0]
-                        for k in range(i + 1, n):
-                            t -= lo[k, i] * sol[k, 0]
-                        sol[i, 0] = t / lo[i, i]
-            for a in range(nr - 1):  # C = J (LLᵀ)⁻¹ Jᵀ = YᵀY, Y = L⁻¹ Jᵀ
-                for b in range(nr - 1):
+            yt[0, i] = -r[p, i]
+        for c in range(1, nr):
+            tc = task[c - 1]
+            for i in range(n):
+                yt[c, i] = jp[tc, i]
+        if sym and _cholesky_loops(wm, 0.0, lo):
+            for c in range(0, nr, 4):  # L y = b, four right-hand sides at a time
+                _forward_loops(lo, yt, c, min(4, nr - c))
+            y0 = yt[0]
+            for i in range(n - 1, -1, -1):  # the step also Lᵀ x = y
+                t = y0[i]
+                for k in range(i + 1, n):
+                    t -= lo[k, i] * y0[k]
+                y0[i] = t / lo[i, i]
+            for a in range(nr - 1):  # C = J (LLᵀ)⁻¹ Jᵀ = YᵀY, Y = L⁻¹ Jᵀ: symmetric (products commute)
+                ya = yt[a + 1]
+                for b in range(a, nr - 1):
+                    yb = yt[b + 1]
                     t = 0.0
                     for i in range(n):
-                        t += sol[i, a + 1] * sol[i, b + 1]
-                    cm[p, a, b] = t
+                        t += ya[i] * yb[i]
+                    csol[row, a, b] = t
+                    csol[row, b, a] = t
+            for i in range(n):
+                dx[p, i] = y0[i]
         else:
+            full = np.full((n, nr), np.nan)
+            rhs = np.empty((n, nr))
+            for i in range(n):
+                for c in range(nr):
+                    rhs[i, c] = yt[c, i]
             try:
-                sol = np.linalg.solve(wm[p], rhs)
+                full = np.linalg.solve(wm, rhs)
             except Exception:  # noqa: BLE001, S110 - a singular matrix: NaN, as the numpy twin
                 pass
             for a in range(nr - 1):  # C = J (K − H)⁻¹ Jᵀ
                 for b in range(nr - 1):
                     t = 0.0
                     for i in range(n):
-                        t += ja[p, task[a], i] * sol[i, b + 1]
-                    cm[p, a, b] = t
-        for i in range(n):
-            dx[p, i] = sol[i, 0]
+                        t += jp[task[a], i] * full[i, b + 1]
+                    csol[row, a, b] = t
+            for i in range(n):
+                dx[p, i] = full[i, 0]
+        cand = conv[p]
+        if not cand and big_r <= near * stat[p]:
+            st = 0.0
+            for i in range(n):
+                st = max(st, abs(dx[p, i] / var[p, i]))
+            cand = st <= 2.0 * polish_step
+        if cand:  # may finish now: the stability verdict, and K − H for a late solve
+            for i in range(n):
+                for j in range(i + 1):
+                    s_clear[i, j] = wm[i, j] if sym else 0.5 * (wm[i, j] + wm[j, i])
+            clear[row] = _cholesky_loops(s_clear, tau, lo)
+            if not conv[p]:
+                for i in range(n):
+                    for j in range(n):
+                        amat[row, i, j] = wm[i, j]
+
+
+def _origins_loops(  # pragma: no cover - compiled
+    anchor, rp, tp, axis, pr, jidx, kmat, kk, q, sn, cs, g_anchor, g_start, g_idx, g_c, out
+):
+    """The compiled :meth:`BatchedChain.joint_origins`, pose by pose, on the arrays of
+    :meth:`BatchedChain._origin_arrays`: step ``s`` (a set joint) hangs from slot ``anchor[s]``
+    (0: the universe, ``s' + 1``: step s') by ``(rp[s], tp[s])`` and turns about (slides along)
+    ``axis[s]`` by its pose value (``sn``, ``cs``: its sine and cosine; ``q``: a prismatic one's
+    value); group ``g`` places the joints ``g_idx[g_start[g]:g_start[g + 1]]`` at ``g_c`` in the
+    frame of slot ``g_anchor[g]``. Each entry takes the operations of the stacked version in its
+    order (:func:`_mm`'s sums, Rodrigues' ``(I + s K) + (1 − c) K²``, the universe's zero origin
+    added)."""
+    ns = anchor.shape[0]
+    rot = np.empty((ns + 1, 3, 3))
+    pos = np.empty((ns + 1, 3))
+    r = np.empty((3, 3))
+    rq = np.empty((3, 3))
+    t = np.empty(3)
+    for p in range(out.shape[0]):
+        for s in range(ns):
+            a = anchor[s]
+            for i in range(3):
+                if a == 0:
+                    for j in range(3):
+                        r[i, j] = rp[s, i, j]
+                    t[i] = 0.0 + tp[s, i]
+                else:
+                    for j in range(3):
+                        r[i, j] = rot[a, i, 0] * rp[s, 0, j] + rot[a, i, 1] * rp[s, 1, j] + rot[a, i, 2] * rp[s, 2, j]
+                    t[i] = pos[a, i] + (rot[a, i, 0] * tp[s, 0] + rot[a, i, 1] * tp[s, 1] + rot[a, i, 2] * tp[s, 2])
+            b = s + 1
+            if pr[s]:
+                v = q[s, p]
+                for i in range(3):
+                    t[i] = t[i] + (r[i, 0] * axis[s, 0] + r[i, 1] * axis[s, 1] + r[i, 2] * axis[s, 2]) * v
+                    for j in range(3):
+                        rot[b, i, j] = r[i, j]
+            else:
+                sv = sn[s, p]
+                cv = 1.0 - cs[s, p]
+                for i in range(3):
+                    for j in range(3):
+                        rq[i, j] = ((1.0 if i == j else 0.0) + sv * kmat[s, i, j]) + cv * kk[s, i, j]
+                for i in range(3):
+                    for j in range(3):
+                        rot[b, i, j] = r[i, 0] * rq[0, j] + r[i, 1] * rq[1, j] + r[i, 2] * rq[2, j]
+            for i in range(3):
+                pos[b, i] = t[i]
+                out[p, jidx[s], i] = t[i]
+        for g in range(g_anchor.shape[0]):
+            a = g_anchor[g]
+            for m in range(g_start[g], g_start[g + 1]):
+                jo = g_idx[m]
+                for i in range(3):
+                    if a == 0:
+                        out[p, jo, i] = 0.0 + g_c[m, i]
+                    else:
+                        out[p, jo, i] = pos[a, i] + (rot[a, i, 0] * g_c[m, 0] + rot[a, i, 1] * g_c[m, 1] + rot[a, i, 2] * g_c[m, 2])
 
 
 _KERNEL = None
-_KERNEL_CLEAR = None
+_ORIGINS = None
 
 
 def kernel():
     """The compiled :func:`_system_loops` (numba, machine code cached on disk next to this file),
     or None when numba cannot be imported. Loaded once per process."""
-    global _KERNEL, _KERNEL_CLEAR
+    global _KERNEL, _ORIGINS
     if _KERNEL is None:
         try:
             import numba
@@ -631,8 +928,10 @@ def kernel():
         else:
             global _cholesky_loops
             _cholesky_loops = numba.njit(cache=True, nogil=True)(_cholesky_loops)
+            global _forward_loops
+            _forward_loops = numba.njit(cache=True, nogil=True)(_forward_loops)
             _KERNEL = numba.njit(cache=True, nogil=True)(_system_loops)
-            _KERNEL_CLEAR = numba.njit(cache=True, nogil=True)(_clear_loops)
+            _ORIGINS = numba.njit(cache=True, nogil=True)(_origins_loops)
     return _KERNEL or None
 
 
@@ -642,10 +941,12 @@ def warm_kernel() -> None:
     fn = kernel()
     if fn is not None:
         z, e = np.zeros, np.empty
-        fn(z((1, 6, 1)), z((1, 1)), np.ones((1, 1)), z(1), TOL, 1.0, z((3, 3)), z((3, 3)), False, True,
-           np.ones((1, 1), bool), z(1, np.int64), e((1, 1)), e(1), e(1), e(1, bool), e((1, 1, 1)), e((1, 1)),
-           e((1, 1, 1)))  # fmt: skip
-        _KERNEL_CLEAR(np.ones((1, 1, 1)), 0.0, True, e(1, bool))
+        fn(z((1, 6, 1)), z(1, np.int64), z((1, 1)), np.ones((1, 1)), np.ones((1, 1)), z(1), TOL, 1.0, z((3, 3)), z((3, 3)), False,
+           True, np.ones((1, 1), bool), z(1, np.int64), POLISH_STEP, 0.0, z(1, np.int64), e((1, 1)), e(1), e(1),
+           e(1, bool), e((1, 1)), e((1, 1, 1)), e((1, 1, 1)), e(1, bool))  # fmt: skip
+        i8 = np.int64
+        _ORIGINS(z(1, i8), z((1, 3, 3)), z((1, 3)), z((1, 3)), z(1, bool), z(1, i8), z((1, 3, 3)), z((1, 3, 3)), z((1, 1)),
+                 z((1, 1)), z((1, 1)), z(1, i8), z(2, i8), z(1, i8), z((1, 3)), e((1, 1, 3)))  # fmt: skip
 
 
 def jit_available() -> bool:
