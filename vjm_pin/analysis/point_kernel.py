@@ -567,15 +567,18 @@ def _eq28_tangent(jac, hz, kz, dt, nt, sing_rcond, xd, fd):
             mm[i, j] = max(abs(a[i, j]), abs(a[j, i]))
     d = np.ones(e)
     rr = np.empty(e)
-    for _ in range(4):
+    for sweep in range(4):
         for i in range(e):
             v = 0.0
             for j in range(e):
                 v = max(v, mm[i, j])
             rr[i] = 1.0 / np.sqrt(v if v != 0.0 else 1.0)
+        if sweep < 3:  # (the last sweep's scaled matrix is not read)
+            for i in range(e):
+                ri = rr[i]
+                for j in range(e):
+                    mm[i, j] *= ri * rr[j]
         for i in range(e):
-            for j in range(e):
-                mm[i, j] *= rr[i] * rr[j]
             d[i] *= rr[i]
     sm = np.empty((e, e))
     for i in range(e):
@@ -587,8 +590,10 @@ def _eq28_tangent(jac, hz, kz, dt, nt, sing_rcond, xd, fd):
         inv = np.linalg.inv(sm)
     except Exception:  # exactly singular or not finite (numba's LinAlgError): declined, not raised
         return False, np.nan
-    if not np.all(np.isfinite(inv)):
-        return False, np.nan
+    for i in range(e):  # (np.all(np.isfinite(inv)) without its temporary)
+        for j in range(e):
+            if not np.isfinite(inv[i, j]):
+                return False, np.nan
     c1i, r1i = _abs_sums(inv, cs)
     if not np.sqrt(c1s * r1s) * np.sqrt(c1i * r1i) * sing_rcond * 10.0 <= 1.0:
         return False, np.nan
@@ -829,7 +834,9 @@ def _margin_tail(jfree, hh, hz, kz, task, dt, mask, wrench, use_rate, fast_rank,
     for c in range(n - m):
         w[m + c] = top[c]
     _q_vector(hh, w, m, n, False)
-    res = asym @ w - mu * w
+    res = asym @ w  # (BLAS dgemv, as before; then − μw in place: the same numbers)
+    for i in range(n):
+        res[i] -= mu * w[i]
     _q_vector(hh, res, m, n, True)  # Yᵀ res: its first m entries
     g = _back_substitute(rmat, res, m)  # R g = Yᵀ res
     return 0, mu, _rate_value(jfree, mask, wrench, task, xd, fd, w, g)

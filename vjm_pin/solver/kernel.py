@@ -298,13 +298,10 @@ def _iterate_body(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, ci
                 jfree[a_, b] = J6[a_, free[b]]
         jac = np.empty((m, n))
         for i in range(m):
-            jac[i, :] = jfree[task[i], :]
+            for c in range(n):
+                jac[i, c] = jfree[task[i], c]
         tau = np.zeros(n)
-        for i in range(nt):
-            s = 0.0
-            for j in range(nt):
-                s += kz[i, j] * (x[theta_idx[j]] - theta0[j])
-            tau[i] = s
+        _spring_gradient(kz, x, theta_idx, theta0, nt, tau)
         hh = _qr_t(jac, m, n)
         ok, rr, f, r, f6 = _multiplier(jac, hh, tau, task, m, n)
         if not ok:
@@ -316,28 +313,21 @@ def _iterate_body(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, ci
     # Qᵀ W Q, W = K − H: its trailing block is ZᵀWZ, its block [m:, :m] is ZᵀWY. Both sides as
     # left applications of the reflectors (row operations: contiguous, vectorisable loops):
     # A = Qᵀ W, then Qᵀ Aᵀ = (Qᵀ W Q)ᵀ
-    wq = kz - hz
+    wq = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            wq[i, j] = kz[i, j] - hz[i, j]
     _reflect_rows(hh, wq, m, n)
-    wt = np.ascontiguousarray(wq.T)
+    wt = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            wt[i, j] = wq[j, i]
     _reflect_rows(hh, wt, m, n)
-    wq = np.ascontiguousarray(wt.T)
     if not converged:
         if follow:  # Cholesky of (red + redᵀ) − 2·shift·I, red = ZᵀWZ
-            lo = np.zeros((nz, nz))
-            for j in range(nz):
-                s = wq[m + j, m + j] + wq[m + j, m + j] - 2.0 * shift
-                for k in range(j):
-                    s -= lo[j, k] * lo[j, k]
-                if not s > 0.0:
-                    return STEP_FAIL, kkt, ep, er, rs, fact if keep else fact_in, empty, empty, empty
-                dj = math.sqrt(s)
-                lo[j, j] = dj
-                for i in range(j + 1, nz):
-                    s = wq[m + i, m + j] + wq[m + j, m + i]
-                    for k in range(j):
-                        s -= lo[i, k] * lo[j, k]
-                    lo[i, j] = s / dj
-        ok, dx = _step_loops(wq, hh, rr, e, r, n, m)
+            if not _shifted_cholesky(wt, m, nz, shift, np.empty((nz, nz)), np.empty(nz)):
+                return STEP_FAIL, kkt, ep, er, rs, fact if keep else fact_in, empty, empty, empty
+        ok, dx = _step_t(wt, hh, rr, e, r, n, m)
         if not ok:
             return STEP_FAIL, kkt, ep, er, rs, fact if keep else fact_in, empty, empty, empty
         smax = 0.0
@@ -349,7 +339,7 @@ def _iterate_body(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, ci
             return STEP_FAIL, kkt, ep, er, rs, fact if keep else fact_in, empty, empty, empty
         return CONTINUE, kkt, ep, er, rs, fact if keep else fact_in, dx if keep else empty, _moved_loops(x, free, dx, flush), empty
     if polish_left:
-        ok, dx = _step_loops(wq, hh, rr, e, r, n, m)
+        ok, dx = _step_t(wt, hh, rr, e, r, n, m)
         if ok:
             finite = True
             smax = 0.0
@@ -364,7 +354,7 @@ def _iterate_body(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, ci
     sym = np.empty((nz, nz))
     for i in range(nz):
         for j in range(nz):
-            v = 0.5 * (-wq[m + i, m + j] + -wq[m + j, m + i])
+            v = 0.5 * (-wt[m + j, m + i] + -wt[m + i, m + j])
             if not math.isfinite(v):
                 return RANK_FAIL, kkt, ep, er, rs, fact if keep else fact_in, empty, empty, empty
             sym[i, j] = v
@@ -374,11 +364,51 @@ def _iterate_body(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, ci
     return CONVERGED, kkt, ep, er, rs, fact, empty, empty, ev
 
 
+def _spring_gradient(kz, x, theta_idx, theta0, nt, tau):
+    """``τ[:nθ] = K_θ (θ − θ₀)`` into ``tau``: each entry the sum over ``j`` in index order of
+    ``K[i, j]·(x[θ_j] − θ₀_j)`` (the difference computed once per ``j``: the same value), four rows at a time
+    (independent chains instead of one: the same numbers, not one sum after the other)."""
+    dth = np.empty(nt)
+    for j in range(nt):
+        dth[j] = x[theta_idx[j]] - theta0[j]
+    i = 0
+    while i + 4 <= nt:
+        k0 = kz[i]
+        k1 = kz[i + 1]
+        k2 = kz[i + 2]
+        k3 = kz[i + 3]
+        s0 = 0.0
+        s1 = 0.0
+        s2 = 0.0
+        s3 = 0.0
+        for j in range(nt):
+            dj = dth[j]
+            s0 += k0[j] * dj
+            s1 += k1[j] * dj
+            s2 += k2[j] * dj
+            s3 += k3[j] * dj
+        tau[i] = s0
+        tau[i + 1] = s1
+        tau[i + 2] = s2
+        tau[i + 3] = s3
+        i += 4
+    while i < nt:
+        s = 0.0
+        for j in range(nt):
+            s += kz[i, j] * dth[j]
+        tau[i] = s
+        i += 1
+
+
 def _qr_t(jac, m, n):
     """Householder QR of ``Jᵀ`` (n × m), dgeqr2 / dlarfg: row k of ``hh`` is column k of ``Jᵀ``,
     then the reflector ``v_k`` (``v_k[k] = 1`` implicit, entries < k unused); ``hh[m, k] = τ_k``."""
-    hh = np.zeros((m + 1, n))
-    hh[:m, :] = jac
+    hh = np.empty((m + 1, n))
+    for i in range(m):
+        for c in range(n):
+            hh[i, c] = jac[i, c]
+    for c in range(n):
+        hh[m, c] = 0.0
     for k in range(m):
         alpha = hh[k, k]
         xn2 = 0.0
@@ -441,10 +471,13 @@ def _back_substitute(rr, y, m):
 
 
 def _hessian(jfree, f6, mask, n):
-    """The (θ, q)-ordered Hessian of Ψ in screw form (kinematics/screw.py)."""
+    """The (θ, q)-ordered Hessian of Ψ in screw form (kinematics/screw.py): row by row, both cases of
+    the support mask computed and one selected (no branch in the inner loop), every entry the same
+    expression in the same order (:func:`vjm_pin.solver.chain_kernel._hessian_rows`: the same bits)."""
     fx, fy, fz, mx, my, mz = f6[0], f6[1], f6[2], f6[3], f6[4], f6[5]
     d = np.empty((3, n))
     em = np.empty((3, n))
+    w = np.empty((3, n))
     for b in range(n):
         v0, v1, v2 = jfree[0, b], jfree[1, b], jfree[2, b]
         w0, w1, w2 = jfree[3, b], jfree[4, b], jfree[5, b]
@@ -454,14 +487,22 @@ def _hessian(jfree, f6, mask, n):
         em[0, b] = mz * w1 - my * w2
         em[1, b] = -mz * w0 + mx * w2
         em[2, b] = my * w0 - mx * w1
+        w[0, b] = w0
+        w[1, b] = w1
+        w[2, b] = w2
+    d0, d1, d2 = d[0], d[1], d[2]
+    wa, wb, wc = w[0], w[1], w[2]
     hz = np.empty((n, n))
     for i in range(n):
+        di0, di1, di2 = d0[i], d1[i], d2[i]
+        ei0, ei1, ei2 = em[0, i], em[1, i], em[2, i]
+        wi0, wi1, wi2 = wa[i], wb[i], wc[i]
+        row = hz[i]
+        mrow = mask[i]
         for j in range(n):
-            if mask[i, j]:
-                hz[i, j] = (jfree[3, j] * d[0, i] + jfree[4, j] * d[1, i] + jfree[5, j] * d[2, i]
-                            + (em[0, i] * jfree[3, j] + em[1, i] * jfree[4, j] + em[2, i] * jfree[5, j]))
-            else:
-                hz[i, j] = jfree[3, i] * d[0, j] + jfree[4, i] * d[1, j] + jfree[5, i] * d[2, j]
+            ta = wa[j] * di0 + wb[j] * di1 + wc[j] * di2 + (ei0 * wa[j] + ei1 * wb[j] + ei2 * wc[j])
+            tb = wi0 * d0[j] + wi1 * d1[j] + wi2 * d2[j]
+            row[j] = ta if mrow[j] else tb
     return hz
 
 
@@ -576,12 +617,15 @@ def _lu_eliminate(a, y, k):
             y[c] = y[p]
             y[p] = tmp2
         inv = 1.0 / a[c, c]
+        uc = a[c, c + 1:]  # (row views: loops from 0 vectorise, loops from c + 1 do not)
+        nk = k - c - 1
         for i in range(c + 1, k):
             lik = a[i, c] * inv
             a[i, c] = lik
             if lik != 0.0:
-                for j in range(c + 1, k):
-                    a[i, j] -= lik * a[c, j]
+                ai = a[i, c + 1:]
+                for j in range(nk):
+                    ai[j] -= lik * uc[j]
                 y[i] -= lik * y[c]
     return True
 
@@ -615,6 +659,82 @@ def _step_loops(wq, hh, rr, e, r, n, m):
         return False, np.zeros(0)
     pz = _back_substitute(lu, rhs, nz)
     # δx = Q [p_Y; −p_Z] = H_0 … H_{m−1} [p_Y; −p_Z]
+    dx = np.empty(n)
+    for i in range(m):
+        dx[i] = py[i]
+    for j in range(nz):
+        dx[m + j] = -pz[j]
+    for k in range(m - 1, -1, -1):
+        t = hh[m, k]
+        if t == 0.0:
+            continue
+        s = dx[k]
+        for i in range(k + 1, n):
+            s += hh[k, i] * dx[i]
+        s *= t
+        dx[k] -= s
+        for i in range(k + 1, n):
+            dx[i] -= s * hh[k, i]
+    return True, dx
+
+
+def _shifted_cholesky(wt, m, nz, shift, lt, col):
+    """Whether ``(red + redᵀ) − 2·shift·I`` (``red`` = ZᵀWZ, the trailing block of ``wt`` = ``(Qᵀ W Q)ᵀ``)
+    has a Cholesky factorisation (``dpotrf``: fails on a non-positive pivot), the ``follow_stable`` test
+    of :func:`_iterate_body`. Column by column with the factor stored transposed (``lt[k, i] = L[i, k]``):
+    every entry ``s = a_ij − Σ_k L[i, k] L[j, k]`` accumulated in the same order (k ascending) as the
+    row-oriented loops, across rows ``i`` at once (contiguous: vectorised): the same numbers. ``lt``
+    (nz, nz) and ``col`` (nz,): scratch."""
+    for j in range(nz):
+        s = wt[m + j, m + j] + wt[m + j, m + j] - 2.0 * shift
+        for k in range(j):
+            s -= lt[k, j] * lt[k, j]
+        if not s > 0.0:
+            return False
+        dj = math.sqrt(s)
+        lt[j, j] = dj
+        for i in range(j + 1, nz):
+            col[i] = wt[m + j, m + i] + wt[m + i, m + j]
+        cj = col[j + 1:]  # (views: loops from 0 vectorise)
+        nj = nz - j - 1
+        for k in range(j):
+            ljk = lt[k, j]
+            lk = lt[k, j + 1:]
+            for i in range(nj):
+                cj[i] -= lk[i] * ljk
+        lj = lt[j, j + 1:]
+        for i in range(nj):
+            lj[i] = cj[i] / dj
+    return True
+
+
+def _step_t(wt, hh, rr, e, r, n, m):
+    """:func:`_step_loops` on ``wt`` = ``(Qᵀ W Q)ᵀ``, read transposed (no transposed copy: the same
+    numbers): (ok, δx)."""
+    nz = n - m
+    py = np.zeros(m)
+    for i in range(m):  # Rᵀ p_Y = e
+        if rr[i, i] == 0.0:
+            return False, np.zeros(0)
+    for i in range(m):
+        s = e[i]
+        for j in range(i):
+            s -= rr[j, i] * py[j]
+        py[i] = s / rr[i, i]
+    qr_ = _apply_qt(hh, r, m, n)
+    rhs = np.zeros(nz)
+    for j in range(nz):
+        s = qr_[m + j]
+        for i in range(m):
+            s += wt[i, m + j] * py[i]
+        rhs[j] = s
+    lu = np.empty((nz, nz))
+    for i in range(nz):
+        for j in range(nz):
+            lu[i, j] = wt[m + j, m + i]
+    if not _lu_eliminate(lu, rhs, nz):
+        return False, np.zeros(0)
+    pz = _back_substitute(lu, rhs, nz)
     dx = np.empty(n)
     for i in range(m):
         dx[i] = py[i]
@@ -736,20 +856,32 @@ def _certified_stable(sym, nz, thr):
         for j in range(nz):
             fro += sym[i, j] * sym[i, j]
     sh = thr + CERT_MARGIN * (math.sqrt(fro) + thr)
-    lo = np.zeros((nz, nz))
+    # column by column, the factor stored transposed (lt[k, i] = L[i, k]): every entry accumulated in
+    # the same order (k ascending) as the row-oriented loops, across rows at once (vectorised); sym is
+    # exactly symmetric (:func:`_iterate_body` sums the two mirrored entries), row j read for column j
+    lt = np.empty((nz, nz))
+    col = np.empty(nz)
     for j in range(nz):
         s = -sym[j, j] - sh
         for k in range(j):
-            s -= lo[j, k] * lo[j, k]
+            s -= lt[k, j] * lt[k, j]
         if not s > 0.0:
             return False
         dj = math.sqrt(s)
-        lo[j, j] = dj
-        for i in range(j + 1, nz):
-            s = -sym[i, j]
-            for k in range(j):
-                s -= lo[i, k] * lo[j, k]
-            lo[i, j] = s / dj
+        lt[j, j] = dj
+        sj = sym[j, j + 1:]
+        cj = col[j + 1:]  # (views: loops from 0 vectorise)
+        nj = nz - j - 1
+        for i in range(nj):
+            cj[i] = -sj[i]
+        for k in range(j):
+            ljk = lt[k, j]
+            lk = lt[k, j + 1:]
+            for i in range(nj):
+                cj[i] -= lk[i] * ljk
+        lj = lt[j, j + 1:]
+        for i in range(nj):
+            lj[i] = cj[i] / dj
     return True
 
 
@@ -854,6 +986,19 @@ def _same_bits(a, b):
     return True
 
 
+def _copy1(dst, src):
+    """``dst[:] = src`` (explicit loop: cheaper than numba's slice assignment at these sizes)."""
+    for i in range(src.shape[0]):
+        dst[i] = src[i]
+
+
+def _copy2(dst, src):
+    """``dst[:, :] = src`` (explicit loops)."""
+    for i in range(src.shape[0]):
+        for j in range(src.shape[1]):
+            dst[i, j] = src[i, j]
+
+
 def _iterations_into(x0, kx, have, kf, kpos, krot, geo, jinfo, rt, rot, flush, ci, cf, kz, mask, theta0, vscale,
                      escale, xout, ws, kbuf, thr, defer, lim):
     """The whole plain local iteration of :meth:`~vjm_pin.solver.equilibrium.EquilibriumSolver._fused_iterations`
@@ -913,15 +1058,15 @@ def _iterations_into(x0, kx, have, kf, kpos, krot, geo, jinfo, rt, rot, flush, c
                 return GAVE_WAY, it, counted, kkt, ep, er, rs, reuse
             nz = n - m
             sym = ev.reshape((nz, nz))
-            ws[0][:, :] = kf2[0]
-            ws[1][:, :] = kf2[1]
-            ws[2][:, :] = kf2[2]
-            ws[3][:] = kf2[3]
-            ws[4][:] = kf2[4]
-            ws[5][:] = kf2[5]
-            ws[6][:, :] = kf2[6]
-            ws[7][:] = kf2[7]
-            ws[9][:, :] = sym
+            _copy2(ws[0], kf2[0])
+            _copy2(ws[1], kf2[1])
+            _copy2(ws[2], kf2[2])
+            _copy1(ws[3], kf2[3])
+            _copy1(ws[4], kf2[4])
+            _copy1(ws[5], kf2[5])
+            _copy2(ws[6], kf2[6])
+            _copy1(ws[7], kf2[7])
+            _copy2(ws[9], sym)
             info = ws[10]
             info[1] = cond
             if defer and _certified_stable(sym, nz, thr):
@@ -1003,9 +1148,11 @@ def looped():
                 _looped = False
             else:
                 g = globals()
-                opts = {"cache": True, "nogil": True}
+                opts = {"cache": True, "nogil": True, "error_model": "numpy"}
                 g["_fk_jit"], g["_roterr_jit"] = fk[0], fk[2]
                 g["_same_bits"] = numba.njit(**opts)(_same_bits)
+                g["_copy1"] = numba.njit(**opts)(_copy1)
+                g["_copy2"] = numba.njit(**opts)(_copy2)
                 g["_restore_jit"] = restorer()
                 g["_restore_looped"] = numba.njit(**opts)(_restore_into)
                 _looped = numba.njit(**opts)(_iterations_into)
@@ -1029,14 +1176,15 @@ def restorer():
         else:
             import numba
 
-            _restorer = numba.njit(cache=True, nogil=True)(_restore_step)
+            _restorer = numba.njit(cache=True, nogil=True, error_model="numpy")(_restore_step)
     return _restorer or None
 
 
 #: The njit helpers of :func:`_iterate_loops`, compiled (in this order) by :func:`_load_compiled`;
 #: the chain kernel (:mod:`vjm_pin.solver.chain_kernel`) calls the same ones (not ``_iterate_body``).
 _HELPERS = ("_q_vector", "_apply_qt", "_qr_t", "_back_substitute", "_multiplier", "_hessian", "_progress", "_full_rank", "_reflect_rows",
-            "_lu_eliminate", "_step_loops", "_moved_loops", "_iterate_body")
+            "_lu_eliminate", "_step_loops", "_shifted_cholesky", "_step_t", "_moved_loops", "_spring_gradient",
+            "_iterate_body")
 _lean = None  # the compiled _iterate_into once built, False when numba is unavailable
 
 
@@ -1053,7 +1201,7 @@ def lean():
             import numba
 
             g = globals()
-            opts = {"cache": True, "nogil": True}
+            opts = {"cache": True, "nogil": True, "error_model": "numpy"}
             g["_iterate_jit"] = g["_iterate_body"]  # (compiled by _load_compiled)
             g["_cond_bound"] = numba.njit(**opts)(_cond_bound)
             g["_certified_stable"] = numba.njit(**opts)(_certified_stable)
@@ -1109,7 +1257,9 @@ def _load_compiled():
         if _built is not None:  # built before (and reset by a test): the same dispatchers
             _compiled = _built
             return _compiled
-        opts = {"cache": True, "nogil": True}
+        # numpy's error model: no zero test before every division (each divisor here is nonzero by its
+        # guard: a zero pivot, norm or scale is tested first), the same numbers
+        opts = {"cache": True, "nogil": True, "error_model": "numpy"}
         g = globals()
         for name in _HELPERS:
             g[name] = numba.njit(**opts)(g[name])
