@@ -67,6 +67,7 @@ import numpy as np
 from vjm_pin.solver import chain_algebra as _algebra
 from vjm_pin.solver import kernel as _kernel
 from vjm_pin.solver.chain_algebra import PIVOT_RCOND, RHO_FACTOR, SOLVE_RTOL, _factor_loops, _inertia_small, _split
+from vjm_pin.solver.chain_algebra import _inertia_pivots
 from vjm_pin.solver.chain_algebra import _matvec_loops as _matvec
 from vjm_pin.solver.chain_algebra import _solve_loops as _solve
 from vjm_pin.solver.kernel import (
@@ -172,14 +173,41 @@ def _bordered(wd, wu, wv, wp, wq, starts, dpos, kp, cb):
             npos += 1
     kref = kref_sum / npos if npos else 1.0
     comp = 0.0
+    tb = np.empty(b)  # a block's sums side by side (each in j order), then added to comp in i order
     for kb in range(nb):
         a0, a1 = starts[kb], starts[kb + 1]
+        nk = a1 - a0
         for c in range(k):
-            for i in range(a0, a1):
-                t = 0.0
-                for j in range(a0, a1):
-                    t += kp[i, j - a0] * cb[c, j]
-                comp += cb[c, i] * t
+            i = 0
+            while i + 2 < nk:
+                t0, t1, t2 = 0.0, 0.0, 0.0
+                for j in range(nk):
+                    cj = cb[c, a0 + j]
+                    t0 += kp[a0 + i, j] * cj
+                    t1 += kp[a0 + i + 1, j] * cj
+                    t2 += kp[a0 + i + 2, j] * cj
+                tb[i] = t0
+                tb[i + 1] = t1
+                tb[i + 2] = t2
+                i += 3
+            if i + 1 < nk:
+                t0, t1 = 0.0, 0.0
+                for j in range(nk):
+                    cj = cb[c, a0 + j]
+                    t0 += kp[a0 + i, j] * cj
+                    t1 += kp[a0 + i + 1, j] * cj
+                tb[i] = t0
+                tb[i + 1] = t1
+                i += 2
+            if i < nk:
+                t0 = 0.0
+                for j in range(nk):
+                    cj = cb[c, a0 + j]
+                    t0 += kp[a0 + i, j] * cj
+                tb[i] = t0
+                i += 1
+            for i in range(nk):
+                comp += cb[c, a0 + i] * tb[i]
     if k == 0:
         rho = 0.0
     elif comp > 0.0 and math.isfinite(comp):
@@ -197,12 +225,37 @@ def _bordered(wd, wu, wv, wp, wq, starts, dpos, kp, cb):
     bd = np.zeros((n + k, bsz))
     for kb in range(nb):
         a0, a1 = starts[kb], starts[kb + 1]
+        nk = a1 - a0
         for i in range(a0, a1):
-            for j in range(a0, a1):
-                t = 0.0
+            si = s[i]
+            j = 0
+            while j + 2 < nk:
+                t0, t1, t2 = 0.0, 0.0, 0.0
                 for c in range(k):
-                    t += cb[c, i] * cb[c, j]
-                bd[i, j - a0] = (wd[i, j - a0] + rho * t) * s[i] * s[j]
+                    ci = cb[c, i]
+                    t0 += ci * cb[c, a0 + j]
+                    t1 += ci * cb[c, a0 + j + 1]
+                    t2 += ci * cb[c, a0 + j + 2]
+                bd[i, j] = (wd[i, j] + rho * t0) * si * s[a0 + j]
+                bd[i, j + 1] = (wd[i, j + 1] + rho * t1) * si * s[a0 + j + 1]
+                bd[i, j + 2] = (wd[i, j + 2] + rho * t2) * si * s[a0 + j + 2]
+                j += 3
+            if j + 1 < nk:
+                t0, t1 = 0.0, 0.0
+                for c in range(k):
+                    ci = cb[c, i]
+                    t0 += ci * cb[c, a0 + j]
+                    t1 += ci * cb[c, a0 + j + 1]
+                bd[i, j] = (wd[i, j] + rho * t0) * si * s[a0 + j]
+                bd[i, j + 1] = (wd[i, j + 1] + rho * t1) * si * s[a0 + j + 1]
+                j += 2
+            if j < nk:
+                t0 = 0.0
+                for c in range(k):
+                    ci = cb[c, i]
+                    t0 += ci * cb[c, a0 + j]
+                bd[i, j] = (wd[i, j] + rho * t0) * si * s[a0 + j]
+                j += 1
     bu = np.zeros((n + k, r0 + k))
     bv = np.zeros((n + k, r0 + k))
     bp = np.zeros((n + k, s0_ + k))
@@ -301,12 +354,37 @@ def _kkt_solve(starts, wd, wu, wv, wp, wq, cb, sigma, bst, pinv, bu, fx, fy, bq,
                     t += cb[j, i] * lam[j, c]
                 r1[i, c] = b1[i, c] - t
                 num = max(num, abs(r1[i, c] * s[i]))
+        for c in range(nc):  # the k sums over the chain side by side (each in i order)
+            j = 0
+            while j + 2 < k:
+                t0, t1, t2 = 0.0, 0.0, 0.0
+                for i in range(n):
+                    xi = xs[i, c]
+                    t0 += cb[j, i] * xi
+                    t1 += cb[j + 1, i] * xi
+                    t2 += cb[j + 2, i] * xi
+                r2[j, c] = b2[j, c] - t0
+                r2[j + 1, c] = b2[j + 1, c] - t1
+                r2[j + 2, c] = b2[j + 2, c] - t2
+                j += 3
+            if j + 1 < k:
+                t0, t1 = 0.0, 0.0
+                for i in range(n):
+                    xi = xs[i, c]
+                    t0 += cb[j, i] * xi
+                    t1 += cb[j + 1, i] * xi
+                r2[j, c] = b2[j, c] - t0
+                r2[j + 1, c] = b2[j + 1, c] - t1
+                j += 2
+            if j < k:
+                t0 = 0.0
+                for i in range(n):
+                    xi = xs[i, c]
+                    t0 += cb[j, i] * xi
+                r2[j, c] = b2[j, c] - t0
+                j += 1
         for j in range(k):
             for c in range(nc):
-                t = 0.0
-                for i in range(n):
-                    t += cb[j, i] * xs[i, c]
-                r2[j, c] = b2[j, c] - t
                 num = max(num, abs(r2[j, c]))
         xm = 0.0
         for i in range(n):
@@ -345,24 +423,76 @@ def _inertia_factor(starts, diag, u, v, p, q):
     sm = np.zeros((bmax, bmax))
     pk = np.zeros((bmax, bmax))
     yk = np.zeros((bmax, s))
+    tj = np.zeros(bmax)
+    rows = np.empty(bmax, np.int64)
     rc_min = np.inf
     npos, nneg, nzero = 0, 0, 0
     for k in range(len(starts) - 1):
         a, e = starts[k], starts[k + 1]
         nk = e - a
         for i in range(nk):
-            for c in range(s):
-                t = 0.0
+            ai = a + i
+            c = 0
+            while c + 2 < s:
+                t0, t1, t2 = 0.0, 0.0, 0.0
                 for l in range(r):
-                    t += u[a + i, l] * g[l, c]
-                ug[i, c] = t
+                    ul = u[ai, l]
+                    t0 += ul * g[l, c]
+                    t1 += ul * g[l, c + 1]
+                    t2 += ul * g[l, c + 2]
+                ug[i, c] = t0
+                ug[i, c + 1] = t1
+                ug[i, c + 2] = t2
+                c += 3
+            if c + 1 < s:
+                t0, t1 = 0.0, 0.0
+                for l in range(r):
+                    ul = u[ai, l]
+                    t0 += ul * g[l, c]
+                    t1 += ul * g[l, c + 1]
+                ug[i, c] = t0
+                ug[i, c + 1] = t1
+                c += 2
+            if c < s:
+                t0 = 0.0
+                for l in range(r):
+                    ul = u[ai, l]
+                    t0 += ul * g[l, c]
+                ug[i, c] = t0
+                c += 1
         ref_d, ref_c, ref_p = 0.0, 0.0, 0.0
         for i in range(nk):
+            j = 0
+            while j + 2 < nk:
+                t0, t1, t2 = 0.0, 0.0, 0.0
+                for c in range(s):
+                    uc = ug[i, c]
+                    t0 += uc * q[a + j, c]
+                    t1 += uc * q[a + j + 1, c]
+                    t2 += uc * q[a + j + 2, c]
+                tj[j] = t0
+                tj[j + 1] = t1
+                tj[j + 2] = t2
+                j += 3
+            if j + 1 < nk:
+                t0, t1 = 0.0, 0.0
+                for c in range(s):
+                    uc = ug[i, c]
+                    t0 += uc * q[a + j, c]
+                    t1 += uc * q[a + j + 1, c]
+                tj[j] = t0
+                tj[j + 1] = t1
+                j += 2
+            if j < nk:
+                t0 = 0.0
+                for c in range(s):
+                    uc = ug[i, c]
+                    t0 += uc * q[a + j, c]
+                tj[j] = t0
+                j += 1
             rd, rcr = 0.0, 0.0
             for j in range(nk):
-                t = 0.0
-                for c in range(s):
-                    t += ug[i, c] * q[a + j, c]
+                t = tj[j]
                 pi[i, j] = diag[a + i, j] - t
                 rd += abs(diag[a + i, j])
                 rcr += abs(t)
@@ -399,13 +529,14 @@ def _inertia_factor(starts, diag, u, v, p, q):
                     work[col, j] = work[piv, j]
                     work[piv, j] = t
             dv = work[col, col]
-            for j in range(2 * nk):
+            # (the columns left of col are never read again: from col on, the same operations)
+            for j in range(col, 2 * nk):
                 work[col, j] /= dv
             for i in range(nk):
                 if i != col:
                     f = work[i, col]
                     if f != 0.0:
-                        for j in range(2 * nk):
+                        for j in range(col, 2 * nk):
                             work[i, j] -= f * work[col, j]
         inv_norm = 0.0
         for i in range(nk):
@@ -423,28 +554,98 @@ def _inertia_factor(starts, diag, u, v, p, q):
         for i in range(nk):
             for j in range(nk):
                 sm[i, j] = pi[i, j]
-        cp, cn, cz = _inertia_small(sm, nk, 1e-14 * nk * ref)
+        cp, cn, cz = _inertia_pivots(sm, nk, 1e-14 * nk * ref, rows)
         npos += cp
         nneg += cn
         nzero += cz
         for i in range(nk):
-            for l in range(r):
-                t = 0.0
+            ai = a + i
+            l = 0
+            while l + 2 < r:
+                t0, t1, t2 = 0.0, 0.0, 0.0
                 for c in range(s):
-                    t += q[a + i, c] * g[l, c]
-                vt[i, l] = v[a + i, l] - t
+                    qc = q[ai, c]
+                    t0 += qc * g[l, c]
+                    t1 += qc * g[l + 1, c]
+                    t2 += qc * g[l + 2, c]
+                vt[i, l] = v[ai, l] - t0
+                vt[i, l + 1] = v[ai, l + 1] - t1
+                vt[i, l + 2] = v[ai, l + 2] - t2
+                l += 3
+            if l + 1 < r:
+                t0, t1 = 0.0, 0.0
+                for c in range(s):
+                    qc = q[ai, c]
+                    t0 += qc * g[l, c]
+                    t1 += qc * g[l + 1, c]
+                vt[i, l] = v[ai, l] - t0
+                vt[i, l + 1] = v[ai, l + 1] - t1
+                l += 2
+            if l < r:
+                t0 = 0.0
+                for c in range(s):
+                    qc = q[ai, c]
+                    t0 += qc * g[l, c]
+                vt[i, l] = v[ai, l] - t0
+                l += 1
         for i in range(nk):
-            for c in range(s):
-                t = 0.0
+            c = 0
+            while c + 2 < s:
+                t0, t1, t2 = 0.0, 0.0, 0.0
                 for j in range(nk):
-                    t += pk[i, j] * (p[a + j, c] - ug[j, c])
-                yk[i, c] = t
+                    pij = pk[i, j]
+                    t0 += pij * (p[a + j, c] - ug[j, c])
+                    t1 += pij * (p[a + j, c + 1] - ug[j, c + 1])
+                    t2 += pij * (p[a + j, c + 2] - ug[j, c + 2])
+                yk[i, c] = t0
+                yk[i, c + 1] = t1
+                yk[i, c + 2] = t2
+                c += 3
+            if c + 1 < s:
+                t0, t1 = 0.0, 0.0
+                for j in range(nk):
+                    pij = pk[i, j]
+                    t0 += pij * (p[a + j, c] - ug[j, c])
+                    t1 += pij * (p[a + j, c + 1] - ug[j, c + 1])
+                yk[i, c] = t0
+                yk[i, c + 1] = t1
+                c += 2
+            if c < s:
+                t0 = 0.0
+                for j in range(nk):
+                    pij = pk[i, j]
+                    t0 += pij * (p[a + j, c] - ug[j, c])
+                yk[i, c] = t0
+                c += 1
         for l in range(r):
-            for c in range(s):
-                t = 0.0
+            c = 0
+            while c + 2 < s:
+                t0, t1, t2 = 0.0, 0.0, 0.0
                 for i in range(nk):
-                    t += vt[i, l] * yk[i, c]
-                g[l, c] += t
+                    vl = vt[i, l]
+                    t0 += vl * yk[i, c]
+                    t1 += vl * yk[i, c + 1]
+                    t2 += vl * yk[i, c + 2]
+                g[l, c] += t0
+                g[l, c + 1] += t1
+                g[l, c + 2] += t2
+                c += 3
+            if c + 1 < s:
+                t0, t1 = 0.0, 0.0
+                for i in range(nk):
+                    vl = vt[i, l]
+                    t0 += vl * yk[i, c]
+                    t1 += vl * yk[i, c + 1]
+                g[l, c] += t0
+                g[l, c + 1] += t1
+                c += 2
+            if c < s:
+                t0 = 0.0
+                for i in range(nk):
+                    vl = vt[i, l]
+                    t0 += vl * yk[i, c]
+                g[l, c] += t0
+                c += 1
     return rc_min, False, npos, nneg, nzero
 
 
@@ -560,10 +761,16 @@ def _smallest(starts, dpos, kp, jz, f6, kd, cb, scale, has_guess, gvec, vtol, rn
     eigenvector (length n; used when ``has_guess``); when the attempt from it fails (a mode
     switch, no convergence, no certificate) the bracket is made from scratch. ``rnd0``:
     :func:`_rnd_start` of length n when given (a workspace's copy), else it is computed."""
-    n = jz.shape[1]
+    sd, su, sv, sp, sq = _w_gens(jz, f6, starts, kd, True)
+    return _smallest_w(starts, dpos, kp, sd, su, sv, sp, sq, cb, scale, has_guess, gvec, vtol, rnd0)
+
+
+def _smallest_w(starts, dpos, kp, sd, su, sv, sp, sq, cb, scale, has_guess, gvec, vtol, rnd0):
+    """:func:`_smallest` from the generators of ``W_s`` (:func:`_w_gens`, ``symmetric``), which the
+    caller keeps (the point's ``dμ/ds`` multiplies by the same matrix)."""
+    n = sd.shape[0]
     k = cb.shape[0]
     atol = 1e-13 * scale
-    sd, su, sv, sp, sq = _w_gens(jz, f6, starts, kd, True)
     bst, bd, bu, bv, bp, bq, s, rho = _bordered(sd, su, sv, sp, sq, starts, dpos, kp, cb)
     empty = np.zeros(n)
     # a fixed pseudo-random start (the bisection path, a mixed-in component)
@@ -1087,15 +1294,15 @@ def _point_chain(J6, cols, order, task, dt, prow, starts, dpos, kd, kp, kscale, 
             return NEED_DENSE, nan, xd, fd, nan, nan, novec
     # μ: the largest eigenvalue of Vᵀ sym(H − K) V, V the null space of P J: −λ₁
     ch = _held_rows(prow, cb)
-    ok, lam1, w = _smallest(starts, dpos, kp, jz, wrench, kd, ch, kscale, has_guess, gvec, VEC_TOL_MARGIN,
-                            _ws_rnd(wsa, n))
+    sd, su, svv, sp, sq = _w_gens(jz, wrench, starts, kd, True)  # (dμ/ds below uses them too)
+    ok, lam1, w = _smallest_w(starts, dpos, kp, sd, su, svv, sp, sq, ch, kscale, has_guess, gvec, VEC_TOL_MARGIN,
+                              _ws_rnd(wsa, n))
     if not ok:
         return NEED_DENSE, nan, xd, fd, nan, nan, novec
     mu = -lam1
     if not use_rate:
         return 0, k, xd, fd, mu, nan, w
     # dμ/ds = wᵀH'w − 2 gᵀJ'w (PointKernel.margin_rate), chain order, O(n)
-    sd, su, svv, sp, sq = _w_gens(jz, wrench, starts, kd, True)
     wsw = _matvec(starts, sd, su, svv, sp, sq, w.reshape(n, 1))
     resv = np.empty(n)
     for c in range(n):
@@ -1149,7 +1356,7 @@ def _point_chain(J6, cols, order, task, dt, prow, starts, dpos, kd, kp, kscale, 
 _COMPILED: list = []  # [(iterate, point)] once loaded, [None] when numba is unavailable
 _HELPERS = ("_hessian_rows", "_bits_equal", "_ws_store", "_ws_match", "_ws_views", "_ws_rnd", "_rnd_start",
             "_w_gens", "_bordered", "_factor", "_shifted", "_raw_solve", "_kkt_solve", "_inertia_factor",
-            "_count_only", "_count", "_project", "_rayleigh", "_inverse", "_split", "_smallest", "_gather",
+            "_count_only", "_count", "_project", "_rayleigh", "_inverse", "_split", "_smallest_w", "_smallest", "_gather",
             "_held_rows", "_qr_rank", "_twists", "_twist_rate_row", "_rate_terms", "_rate_lin")
 #: The ones :func:`vjm_pin.analysis.point_kernel._point_loops` calls too.
 RATE_HELPERS = ("_back_substitute", "_twists", "_twist_rate_row", "_rate_terms", "_rate_lin")
@@ -1178,6 +1385,7 @@ def _load():
         g[name] = getattr(_kernel, name)
     g["_factor_loops"], g["_solve"], g["_matvec"] = _algebra._kernels()
     g["_inertia_small"] = _algebra._inertia_small  # compiled by _kernels (tests call it here)
+    g["_inertia_pivots"] = _algebra._inertia_pivots  # (compiled by _kernels too)
     for name in _HELPERS:
         g[name] = numba.njit(**opts)(g[name])
     _COMPILED.append((numba.njit(**opts)(_iterate_chain), numba.njit(**opts)(_point_chain)))
