@@ -362,7 +362,7 @@ def test_compiled_restoration_matches_the_numpy_one(case, compiled, monkeypatch)
 
 
 def test_lu_elimination_is_a_solve_with_dgesv_failures(compiled):
-    """``_lu_eliminate`` (the partially pivoted LU of ``_step_loops`` and ``_restore_step``) then
+    """``_lu_eliminate`` (the partially pivoted LU of ``_step_t`` and ``_restore_step``) then
     ``_back_substitute`` solve ``A x = b`` as ``numpy.linalg.solve`` does (to rounding), compiled and
     as plain Python alike (bit for bit); an exactly zero pivot — a zero column, a zero matrix — fails,
     and a pivot chosen by the largest magnitude solves a matrix whose leading entry is zero."""

@@ -1,9 +1,9 @@
 """The reorganised compiled helpers of the dense kernel (vjm_pin/solver/kernel.py) give the numbers of the
-loops they replace, bit for bit: ``_step_t`` (the step on the transposed ``QᵀWQ``) against ``_step_loops``,
-the branch-free ``_hessian``, the column-oriented Cholesky tests (``_shifted_cholesky``,
-``_certified_stable``) and the four-row ``_spring_gradient``. References: the compiled ``_step_loops`` kept
-in kernel.py, and plain Python transcriptions of the former entry-by-entry loops (IEEE double arithmetic,
-the same operations in the same order)."""
+loops they replace, bit for bit: ``_step_t`` (the step on the transposed ``QᵀWQ``) against the former step
+on ``QᵀWQ`` itself, the branch-free ``_hessian``, the column-oriented Cholesky tests (``_shifted_cholesky``,
+``_certified_stable``) and the four-row ``_spring_gradient``. References: plain Python transcriptions of the
+former entry-by-entry loops (IEEE double arithmetic, the same operations in the same order; the compiled
+kernels do not contract products and sums into FMAs)."""
 
 from __future__ import annotations
 
@@ -37,7 +37,46 @@ def _cases(seed, count):
         yield rng, n, m, scale
 
 
-def test_step_on_transpose_matches_step_loops(k):
+def _former_step(k, wq, hh, rr, e, r, n, m):
+    """The step of kernel.py before ``_step_t`` (on ``wq`` = ``QᵀWQ``, its reduced matrix copied row by
+    row), transcribed; the QR and LU helpers are the kernel's compiled ones, as there."""
+    nz = n - m
+    py = np.zeros(m)
+    for i in range(m):
+        if rr[i, i] == 0.0:
+            return False, np.zeros(0)
+    for i in range(m):
+        s = e[i]
+        for j in range(i):
+            s -= rr[j, i] * py[j]
+        py[i] = s / rr[i, i]
+    qr_ = k._apply_qt(hh, r, m, n)
+    rhs = np.zeros(nz)
+    for j in range(nz):
+        s = qr_[m + j]
+        for i in range(m):
+            s += wq[m + j, i] * py[i]
+        rhs[j] = s
+    lu = np.ascontiguousarray(wq[m:, m:])
+    if not k._lu_eliminate(lu, rhs, nz):
+        return False, np.zeros(0)
+    pz = k._back_substitute(lu, rhs, nz)
+    dx = np.concatenate([py, -pz])
+    for kk in range(m - 1, -1, -1):
+        t = hh[m, kk]
+        if t == 0.0:
+            continue
+        s = dx[kk]
+        for i in range(kk + 1, n):
+            s += hh[kk, i] * dx[i]
+        s *= t
+        dx[kk] -= s
+        for i in range(kk + 1, n):
+            dx[i] -= s * hh[kk, i]
+    return True, dx
+
+
+def test_step_on_transpose_matches_the_former_step(k):
     for rng, n, m, scale in _cases(1, 150):
         jac = rng.standard_normal((m, n)) * scale
         hh = k._qr_t(jac, m, n)
@@ -52,7 +91,7 @@ def test_step_on_transpose_matches_step_loops(k):
         k._reflect_rows(hh, wt, m, n)  # (Qᵀ W Q)ᵀ
         wq = np.ascontiguousarray(wt.T)
         e = rng.standard_normal(m) * 1e-3
-        ok1, dx1 = k._step_loops(wq, hh, rr, e, r, n, m)
+        ok1, dx1 = _former_step(k, wq, hh, rr, e, r, n, m)
         ok2, dx2 = k._step_t(wt, hh, rr, e, r, n, m)
         assert ok1 == ok2
         if ok1:
@@ -65,7 +104,7 @@ def test_step_on_transpose_matches_step_loops(k):
     ok, rr, f, r, f6 = k._multiplier(jac, hh, rng.standard_normal(n), np.arange(m, dtype=np.int64), m, n)
     wt = np.zeros((n, n))
     assert not k._step_t(wt, hh, rr, np.ones(m), r, n, m)[0]
-    assert not k._step_loops(np.zeros((n, n)), hh, rr, np.ones(m), r, n, m)[0]
+    assert not _former_step(k, np.zeros((n, n)), hh, rr, np.ones(m), r, n, m)[0]
 
 
 def test_spring_gradient_matches_row_sums(k):

@@ -630,54 +630,6 @@ def _lu_eliminate(a, y, k):
     return True
 
 
-def _step_loops(wq, hh, rr, e, r, n, m):
-    """Compiled ``δx = Y p_Y − Z p_Z`` (see :func:`_null_space_step`) in the rotated basis:
-    ``Rᵀ p_Y = e``, ``(ZᵀWZ) p_Z = (Qᵀ r)[m:] + (ZᵀWY) p_Y``, ``δx = Q [p_Y; −p_Z]``: (ok, δx)."""
-    nz = n - m
-    py = np.zeros(m)
-    for i in range(m):  # Rᵀ p_Y = e
-        if rr[i, i] == 0.0:
-            return False, np.zeros(0)
-    for i in range(m):
-        s = e[i]
-        for j in range(i):
-            s -= rr[j, i] * py[j]
-        py[i] = s / rr[i, i]
-    qr_ = _apply_qt(hh, r, m, n)
-    rhs = np.zeros(nz)
-    for j in range(nz):
-        s = qr_[m + j]
-        for i in range(m):
-            s += wq[m + j, i] * py[i]
-        rhs[j] = s
-    # LU with partial pivoting of ZᵀWZ (dgesv; fails on an exactly zero pivot)
-    lu = np.empty((nz, nz))
-    for i in range(nz):
-        for j in range(nz):
-            lu[i, j] = wq[m + i, m + j]
-    if not _lu_eliminate(lu, rhs, nz):
-        return False, np.zeros(0)
-    pz = _back_substitute(lu, rhs, nz)
-    # δx = Q [p_Y; −p_Z] = H_0 … H_{m−1} [p_Y; −p_Z]
-    dx = np.empty(n)
-    for i in range(m):
-        dx[i] = py[i]
-    for j in range(nz):
-        dx[m + j] = -pz[j]
-    for k in range(m - 1, -1, -1):
-        t = hh[m, k]
-        if t == 0.0:
-            continue
-        s = dx[k]
-        for i in range(k + 1, n):
-            s += hh[k, i] * dx[i]
-        s *= t
-        dx[k] -= s
-        for i in range(k + 1, n):
-            dx[i] -= s * hh[k, i]
-    return True, dx
-
-
 def _shifted_cholesky(wt, m, nz, shift, lt, col):
     """Whether ``(red + redᵀ) − 2·shift·I`` (``red`` = ZᵀWZ, the trailing block of ``wt`` = ``(Qᵀ W Q)ᵀ``)
     has a Cholesky factorisation (``dpotrf``: fails on a non-positive pivot), the ``follow_stable`` test
@@ -709,8 +661,10 @@ def _shifted_cholesky(wt, m, nz, shift, lt, col):
 
 
 def _step_t(wt, hh, rr, e, r, n, m):
-    """:func:`_step_loops` on ``wt`` = ``(Qᵀ W Q)ᵀ``, read transposed (no transposed copy: the same
-    numbers): (ok, δx)."""
+    """Compiled ``δx = Y p_Y − Z p_Z`` (see :func:`_null_space_step`) in the rotated basis, from
+    ``wt`` = ``(Qᵀ W Q)ᵀ`` read transposed (no transposed copy): ``Rᵀ p_Y = e``, ``(ZᵀWZ) p_Z =
+    (Qᵀ r)[m:] + (ZᵀWY) p_Y`` (LU with partial pivoting, as ``dgesv``; fails on an exactly zero
+    pivot), ``δx = Q [p_Y; −p_Z]``: (ok, δx)."""
     nz = n - m
     py = np.zeros(m)
     for i in range(m):  # Rᵀ p_Y = e
@@ -1183,7 +1137,7 @@ def restorer():
 #: The njit helpers of :func:`_iterate_loops`, compiled (in this order) by :func:`_load_compiled`;
 #: the chain kernel (:mod:`vjm_pin.solver.chain_kernel`) calls the same ones (not ``_iterate_body``).
 _HELPERS = ("_q_vector", "_apply_qt", "_qr_t", "_back_substitute", "_multiplier", "_hessian", "_progress", "_full_rank", "_reflect_rows",
-            "_lu_eliminate", "_step_loops", "_shifted_cholesky", "_step_t", "_moved_loops", "_spring_gradient",
+            "_lu_eliminate", "_shifted_cholesky", "_step_t", "_moved_loops", "_spring_gradient",
             "_iterate_body")
 _lean = None  # the compiled _iterate_into once built, False when numba is unavailable
 
