@@ -56,6 +56,7 @@ import numpy as np
 import pinocchio as pin
 
 from vjm_pin.kinematics.chain import flush_tiny
+from vjm_pin.kinematics.closures import skew
 from vjm_pin.kinematics.screw import screw_applicable, support_mask
 from vjm_pin.kinematics.shared import data_for
 from vjm_pin.model.format import VjmModel
@@ -215,7 +216,7 @@ class BatchedChain:
         kmat, kk = np.zeros((ns, 3, 3)), np.zeros((ns, 3, 3))
         for s, st in enumerate(steps):
             if not st[5]:
-                kmat[s] = _skew(st[4])
+                kmat[s] = skew(st[4])
                 kk[s] = kmat[s] @ kmat[s]  # as _rotations
         g_idx = [i for _, idx, _ in groups for i in idx]
         arrays = (
@@ -531,14 +532,9 @@ def _mm(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return acc
 
 
-def _skew(axis: np.ndarray) -> np.ndarray:
-    """``[axis]×`` (3, 3)."""
-    return np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
-
-
 def _rotations(axis: np.ndarray, q: np.ndarray) -> np.ndarray:
     """(P, 3, 3) rotations by the angles ``q`` (P,) about the unit ``axis`` (Rodrigues)."""
-    k = _skew(axis)
+    k = skew(axis)
     return np.eye(3) + np.sin(q)[:, None, None] * k + (1.0 - np.cos(q))[:, None, None] * (k @ k)
 
 
