@@ -4,6 +4,8 @@
   regularity test (:func:`vjm_pin.solver.stiffness._inverse_if_regular`) wherever the bound is not
   within a factor 2 of the threshold, the accepted tangent against the generic inverse, and the
   decline (no exception) of an exactly singular or non-finite matrix;
+- the null-space tangent on the corrector's QR (``_ns_tangent``) against eq. (28) solved in rational
+  arithmetic, and its declines;
 - ``Vᵀ sym(A) V`` by row operations only (``_q_both_sides``, ``_reduced``): the bits of the
   row-by-row reflection and the numbers of an explicit ``Q``;
 - the largest eigenpair (``_top_eigpair``: row-oriented tridiagonalisation, Sturm bisection, inverse
@@ -28,7 +30,7 @@ def jit():
     """The module with its helpers compiled (compiled() replaces the globals by their njit twins)."""
     pytest.importorskip("numba")
     assert pk.compiled()
-    for name in ("_eq28_tangent", "_abs_sums", "_top_eigpair", "_q_both_sides", "_reduced"):
+    for name in ("_eq28_tangent", "_abs_sums", "_top_eigpair", "_q_both_sides", "_reduced", "_ns_tangent"):
         assert hasattr(getattr(pk, name), "py_func"), name
     return pk
 
@@ -139,6 +141,92 @@ def test_tangent_declines_a_singular_matrix_without_raising(jit, kind):
     ok, k = jit._eq28_tangent(jac, hz, kz, np.array([1.0, 0.0, 0.0]), 18, SINGULAR_RCOND, xd, fd)
     assert not ok and np.isnan(k)
     assert not xd.any() and not fd.any()
+
+
+# --------------------------------------------------------------------------- the null-space tangent
+def _exact_eq28(jac, a, dt):
+    """``(δx, δF)`` of ``J δx = d_t``, ``Jᵀ δF + A δx = 0`` in rational arithmetic from the float64 entries."""
+    from fractions import Fraction
+
+    m, n = jac.shape
+    e = m + n
+    rows = [[Fraction(0)] * (e + 1) for _ in range(e)]
+    for r in range(m):
+        for c in range(n):
+            rows[r][m + c] = rows[m + c][r] = Fraction(float(jac[r, c]))
+        rows[r][e] = Fraction(float(dt[r]))
+    for i in range(n):
+        for j in range(n):
+            rows[m + i][m + j] = Fraction(float(a[i, j]))
+    for k in range(e):
+        p = max(range(k, e), key=lambda i: abs(rows[i][k]))
+        rows[k], rows[p] = rows[p], rows[k]
+        for i in range(k + 1, e):
+            f = rows[i][k] / rows[k][k]
+            if f:
+                for j in range(k, e + 1):
+                    rows[i][j] -= f * rows[k][j]
+    sol = [Fraction(0)] * e
+    for i in range(e - 1, -1, -1):
+        sol[i] = (rows[i][e] - sum(rows[i][j] * sol[j] for j in range(i + 1, e))) / rows[i][i]
+    return np.array([float(v) for v in sol[m:]]), np.array([float(v) for v in sol[:m]])
+
+
+@pytest.mark.parametrize("m,nt,nq,sing", [(3, 18, 2, 0.0), (1, 4, 1, 0.0), (6, 6, 3, 0.0), (3, 18, 2, 1e-6)])
+def test_null_space_tangent_against_the_exact_solution(jit, m, nt, nq, sing):
+    """``_ns_tangent`` on the Householder QR of ``Jᵀ`` (the corrector's ``_qr_t``) against eq. (28) solved in
+    rational arithmetic: within the forward error bound of a backward-stable solve (``ε·cond``, the
+    equilibrated unknowns), on random and nearly singular problems; ``wt`` is the corrector's
+    ``(Qᵀ (K − H) Q)ᵀ``, and the result does not depend on the order (θ, q) of the columns."""
+    from vjm_pin.solver.kernel import _qr_t
+
+    rng = np.random.default_rng(11 + m + nt)
+    for _ in range(8):
+        jac, hz, kz = _problem(rng, m, nt, nq, sing)
+        n = nt + nq
+        dt = rng.standard_normal(m)
+        hh = _qr_t(jac, m, n)
+        xd, fd, wt = np.zeros(n), np.zeros(m), np.empty((n, n))
+        ok, k = jit._ns_tangent(jac, hh, hz, kz, dt, xd, fd, wt)
+        assert ok
+        xe, fe = _exact_eq28(jac, hz - kz, dt)
+        big = np.block([[np.zeros((m, m)), jac], [jac.T, hz - kz]])
+        s_eq, d = _ruiz(big)
+        tol = 100.0 * EPS * np.linalg.cond(s_eq) * np.abs(np.r_[fe, xe] / d).max()
+        assert np.abs((xd - xe) / d[m:]).max() <= tol
+        assert np.abs((fd - fe) / d[:m]).max() <= tol
+        assert abs(k - dt @ fe) <= tol * np.abs(dt * d[:m]).sum() + 4 * EPS * np.abs(dt * fe).sum()
+        # wt: (Qᵀ W Q)ᵀ, W = K − H, with the explicit Q of the reflectors
+        q = np.eye(n)
+        for j in range(n):
+            jit._q_vector(hh, q[:, j], m, n, False)
+        assert np.abs(wt - (q.T @ (kz - hz) @ q).T).max() <= 1e-13 * np.abs(kz - hz).max() * n
+
+
+def test_null_space_tangent_declines_what_it_cannot_solve(jit):
+    """A singular ``ZᵀWZ`` (exactly: a zero pivot; numerically: the refinement's correction above
+    :data:`~vjm_pin.analysis.point_kernel.REFINE_TOL`), a non-finite entry, a rank-deficient ``J``:
+    declined (not ok, ``k`` NaN), never raised."""
+    from vjm_pin.solver.kernel import _qr_t
+
+    rng = np.random.default_rng(5)
+    m, nt, nq = 3, 8, 2
+    n = nt + nq
+    dt = np.array([1.0, 0.5, -0.25])
+    cases = []
+    jac, hz, kz = _problem(rng, m, nt, nq)
+    z = np.linalg.svd(jac)[2][m:]  # a basis of the null space of J
+    w = (kz - hz)
+    w_sing = w - (w @ z[0])[:, None] * z[0][None, :]  # W z₀ = 0: ZᵀWZ singular
+    cases.append(("singular ZᵀWZ", jac, kz - w_sing, kz))
+    cases.append(("nan in H", jac, np.where(np.eye(n, dtype=bool), np.nan, hz), kz))
+    jr = jac.copy()
+    jr[2] = jr[0]
+    cases.append(("rank-deficient J", jr, hz, kz))
+    for name, j_, h_, k_ in cases:
+        hh = _qr_t(j_, m, n)
+        ok, k = jit._ns_tangent(j_, hh, h_, k_, dt, np.zeros(n), np.zeros(m), np.empty((n, n)))
+        assert not ok and np.isnan(k), name
 
 
 # --------------------------------------------------------------------------- Vᵀ sym(A) V
