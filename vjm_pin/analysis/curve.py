@@ -143,9 +143,10 @@ _fast_points = True
 #: Private switch (False: dμ/ds by the forward difference of :meth:`_Tracer.dmu` everywhere).
 _analytic_rate = True
 #: Private switch (True: the second-order predictor along the followed branch, used only with
-#: ``_fast_points``; off by default: it halves the Newton iterations past buckling but was not
-#: measurably faster per point, and it moves the equilibria within the solver's tolerance).
-_second_order = False
+#: ``_fast_points``). On by default since it is compiled with the first-order one (the fused step's
+#: ``_predict2_loops``): on the Model C curve ~1 Newton iteration fewer on ~40 % of the points
+#: (~3 µs per point); the equilibria move within the solver's tolerance, not beyond.
+_second_order = True
 #: Private switch (False: every continuation sub-step by the general solve and point path,
 #: ``EquilibriumSolver._solve_local`` then :meth:`_Tracer.point`; True: the fused warm corrector of
 #: :meth:`_Tracer._fused_step`, the same numbers; for the tests and the benchmark).
@@ -691,21 +692,27 @@ class _Tracer:
         if t is not None:
             dw = None  # ds·t[1] (+ the second-order term), when the general solve needs it
             h = a.hist if second_order else None
+            c = None
+            if h is not None:
+                # second order: the tangent's change since the point ``a`` was continued from
+                # (a difference quotient of eq. 29's tangent over a step not much shorter than ds)
+                back = a.s - h[0]
+                if abs(back) >= SECOND_ORDER_BACK * abs(ds) and abs(back) >= 1e-6 * self.range:
+                    c = 0.5 * ds * ds / back
             fz = self._fz
-            fresh = h is None and fz is not None
+            fresh = fz is not None
             if fresh:  # x_pred and its scaled move in one compiled call (x_pred: a fresh float64 (nq,) array)
                 x_pred = np.empty(self._nq)
-                move = fz[0](a.eq.x, t[0], ds, self.free, self.var_scale, _chain._flush_enabled, x_pred)
+                if c is None:
+                    move = fz[0](a.eq.x, t[0], ds, self.free, self.var_scale, _chain._flush_enabled, x_pred)
+                else:  # (the same numbers as the expressions below; dw when the general solve needs it)
+                    move = fz[3](a.eq.x, t[0], h[1], ds, c, self.free, self.var_scale, _chain._flush_enabled,
+                                 x_pred)
             else:
                 dx, dw = ds * t[0], ds * t[1]
-                if h is not None:
-                    # second order: the tangent's change since the point ``a`` was continued from
-                    # (a difference quotient of eq. 29's tangent over a step not much shorter than ds)
-                    back = a.s - h[0]
-                    if abs(back) >= SECOND_ORDER_BACK * abs(ds) and abs(back) >= 1e-6 * self.range:
-                        c = 0.5 * ds * ds / back
-                        dx = dx + c * (t[0] - h[1])
-                        dw = dw + c * (t[1] - h[2])
+                if c is not None:
+                    dx = dx + c * (t[0] - h[1])
+                    dw = dw + c * (t[1] - h[2])
                 x_pred = flush_tiny(a.eq.x + dx)  # no subnormal coordinates (FLUSH_BELOW)
                 move = self.scaled(x_pred - a.eq.x)
             w_pred = None  # a.eq.wrench + dw, when the general solve needs it
@@ -727,7 +734,9 @@ class _Tracer:
             if abs(ds) > 1e-4 * self.range and len(self.vm.task) < len(self.free):
                 return None  # a shorter step first: the safeguarded path is costly
             if w_pred is None:
-                w_pred = a.eq.wrench + (ds * t[1] if dw is None else dw)
+                if dw is None:
+                    dw = ds * t[1] if c is None else ds * t[1] + c * (t[1] - h[2])
+                w_pred = a.eq.wrench + dw
             try:
                 eq = self.cont.solve(
                     target, x0=x_pred, wrench0=w_pred, raise_on_failure=False, fast_fail=True

@@ -895,6 +895,19 @@ def _predict_loops(ax, xd, ds, free, vscale, flush, xp):
     return _scaled_diff(xp, ax, free, vscale)
 
 
+def _predict2_loops(ax, xd, hx, ds, c, free, vscale, flush, xp):
+    """:func:`_predict_loops` with the second-order term of
+    :meth:`~vjm_pin.analysis.curve._Tracer.step`: ``xp = ax + (ds·xd + c·(xd − hx))`` (``hx``: the tangent
+    at the point the branch was continued from), element by element as the numpy expressions (the
+    same numbers), flushed as :func:`_predict_loops`; returns the scaled move."""
+    for i in range(ax.shape[0]):
+        v = ax[i] + (ds * xd[i] + c * (xd[i] - hx[i]))
+        if flush and abs(v) < FLUSH_BELOW:
+            v = 0.0
+        xp[i] = v
+    return _scaled_diff(xp, ax, free, vscale)
+
+
 def _fused_point_loops(x, x_pred, limit, free, vscale, j6, hz, kz, task, dt, mask, wrench, nt, use_rate,
                        fast_rank, sing_rcond, x_dot, w_dot):
     """The continuity check of a corrected sub-step and its point in one call (the fused step of
@@ -1097,7 +1110,7 @@ def _reuse_point_loops(x, x_pred, limit, j6, hh, hz, f6, ci, cfl, kz, mask, out)
 #: loop; the numbers are otherwise the same).
 _NJIT = {"nogil": True, "error_model": "numpy"}
 _point_jit = _point_loops  # the point kernel :func:`_fused_point_loops` calls (compiled by compiled())
-_fused = None  # the compiled (_predict_loops, _fused_point_loops, _scaled_diff) once loaded (compiled())
+_fused = None  # the compiled (_predict_loops, _fused_point_loops, _scaled_diff, _predict2_loops) once loaded
 _compiled = None  # the compiled _point_loops once loaded, False when numba is unavailable
 _reuse = None  # the compiled _reuse_point_loops once loaded (compiled())
 #: This module's njit helpers, compiled (before the kernels that call them) by compiled().
@@ -1157,12 +1170,13 @@ def _fused_load(numba, opts) -> None:
         numba.njit(**opts)(getattr(_predict_loops, "py_func", _predict_loops)),
         numba.njit(**opts)(getattr(_fused_point_loops, "py_func", _fused_point_loops)),
         sd,
+        numba.njit(**opts)(getattr(_predict2_loops, "py_func", _predict2_loops)),
     )
     _reuse = numba.njit(**opts)(getattr(_reuse_point_loops, "py_func", _reuse_point_loops))
 
 
 def fused():
-    """The compiled ``(_predict_loops, _fused_point_loops, _scaled_diff)`` (the fused step of
+    """The compiled ``(_predict_loops, _fused_point_loops, _scaled_diff, _predict2_loops)`` (the fused step of
     :meth:`~vjm_pin.analysis.curve._Tracer._fused_step`), loaded with :func:`compiled`; None when
     numba cannot be imported."""
     if _fused is None:
