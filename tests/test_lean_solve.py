@@ -184,6 +184,9 @@ def test_lean_path_fallback_runs_under_one_blas_thread(two_blas_threads, monkeyp
     (restorations, escape) runs under one BLAS thread, restored afterwards."""
     from tests.blas_pools import blas_threads
 
+    # the numpy path, whose kinematics go through kin.evaluate (the compiled kernel's own compiled
+    # kinematics do not call it: under VJM_PIN_JIT=1 nothing would be seen)
+    monkeypatch.setenv("VJM_PIN_JIT", "0")
     s = EquilibriumSolver(resolve_model("paper-c-s"))
     seen = []
     inner = s.kin.evaluate
