@@ -21,16 +21,26 @@ decided by this process alone:
 The ``KeyboardInterrupt`` is then re-raised; the results reported so far stay with the
 caller.
 
+On a Dask worker a chunk runs with the heap kept between its blocks (:func:`_kept_heap`):
+Dask's nanny starts its workers with ``MALLOC_TRIM_THRESHOLD_=65536``, which turns glibc's
+dynamic mmap threshold off, so without it every large temporary of a batched chunk is a fresh
+``mmap`` page-faulted anew (issue 14: about a quarter of the per-pose cost of ur5 with link
+springs on a running cluster). Where arrays live does not change the numbers computed in them.
+
 This is the orchestration layer of :mod:`vjm_pin.analysis.maps`; it knows nothing of robots.
 """
 
 from __future__ import annotations
 
 import contextlib
+import os
 import queue
 import re
 import signal
 import socket
+import sys
+import threading
+import uuid
 
 from vjm_pin.exceptions import InputError, SchedulerError
 
@@ -232,10 +242,11 @@ def _dask_helper(fn, args, chunks, workers, scheduler, results, stop) -> None:
             slots = IN_FLIGHT * workers
         todo = iter(enumerate(chunks))
         pending = as_completed()
+        name = getattr(fn, "__name__", "chunk")
 
         def submit() -> None:
-            for k, c in todo:
-                f = client.submit(fn, *args, c, pure=False)
+            for k, c in todo:  # keys named after fn, as the dashboard showed them before
+                f = client.submit(_dask_task, fn, *args, c, key=f"{name}-{uuid.uuid4().hex}")
                 futures[f.key] = (k, f)
                 pending.add(f)
                 return
@@ -258,6 +269,108 @@ def _dask_helper(fn, args, chunks, workers, scheduler, results, stop) -> None:
     finally:
         _close_dask(client, cluster, procs, [f for _, f in futures.values()])
         results.put(("done", None, None))
+
+
+def _dask_task(fn, *args):
+    """A chunk on a Dask worker: ``fn(*args)`` with the heap kept (:func:`_kept_heap`)."""
+    with _kept_heap():
+        return fn(*args)
+
+
+# glibc's mallopt parameters
+_M_TRIM_THRESHOLD = -1
+_M_MMAP_THRESHOLD = -3
+#: While a chunk runs: blocks up to this size come from the heap (glibc's largest mmap threshold
+#: on 64-bit), and free memory at the top of the heap is kept up to twice that (glibc's own rule
+#: for its dynamic threshold).
+_KEPT_MMAP = 32 << 20
+_KEPT_TRIM = 64 << 20
+_GLIBC_DEFAULT = 128 << 10  # M_MMAP_THRESHOLD and M_TRIM_THRESHOLD when not set
+_MALLOC_ENV = (
+    "MALLOC_TRIM_THRESHOLD_", "MALLOC_MMAP_THRESHOLD_", "MALLOC_TOP_PAD_", "MALLOC_MMAP_MAX_",
+)  # fmt: skip
+_heap_lock = threading.Lock()
+_heap_users = 0
+_heap_plan = None  # (mallopt, restore [(param, value)]), or False: leave the heap alone
+
+
+def _glibc_size(text: str):
+    """A size as glibc reads it from a ``MALLOC_*_`` variable (decimal, 0x… hex, 0… octal),
+    or None."""
+    t = text.strip()
+    try:
+        if t[:2].lower() == "0x":
+            return int(t[2:], 16)
+        return int(t, 8) if len(t) > 1 and t[0] == "0" else int(t, 10)
+    except ValueError:
+        return None
+
+
+def _heap_settings():
+    """How this process's heap is set, when a chunk should change it: ``(mallopt, restore)``,
+    ``restore`` the ``(parameter, value)`` pairs in force now; else None.
+
+    Only where glibc's dynamic mmap threshold is off because the environment sets a ``MALLOC_*_``
+    variable, as Dask's nanny does for every worker (``distributed.nanny.pre-spawn-environ``:
+    ``MALLOC_TRIM_THRESHOLD_=65536``). Then every array above 128 KiB is a fresh ``mmap`` and goes
+    back to the system when freed, so each block of a batched chunk page-faults its temporaries
+    anew (a few faults per pose, as much kernel time as a quarter of the pose's own work on
+    ur5 with link springs; issue 14); with the dynamic threshold (any process without the
+    variables) glibc keeps them. The values in force are then the environment's (or glibc's
+    defaults), so they can be restored exactly. Not with ``GLIBC_TUNABLES`` malloc settings (their
+    values are not read here), nor off glibc."""
+    global _heap_plan
+    if _heap_plan is None:
+        _heap_plan = False
+        env = os.environ
+        try:
+            libc = os.confstr("CS_GNU_LIBC_VERSION") if sys.platform.startswith("linux") else None
+            glibc = bool(libc) and libc.startswith("glibc")
+        except (ValueError, OSError, AttributeError):
+            glibc = False
+        tunables = "malloc" in env.get("GLIBC_TUNABLES", "")
+        if glibc and any(k in env for k in _MALLOC_ENV) and not tunables:
+            trim = _glibc_size(env.get("MALLOC_TRIM_THRESHOLD_", str(_GLIBC_DEFAULT)))
+            mmap = _glibc_size(env.get("MALLOC_MMAP_THRESHOLD_", str(_GLIBC_DEFAULT)))
+            # (mallopt takes an int; glibc ignores an mmap threshold above its maximum)
+            known = trim is not None and mmap is not None
+            if known and 0 <= mmap <= _KEPT_MMAP and 0 <= trim < 1 << 31:
+                with contextlib.suppress(Exception):
+                    import ctypes
+
+                    mallopt = ctypes.CDLL(None).mallopt
+                    mallopt.argtypes, mallopt.restype = (ctypes.c_int, ctypes.c_int), ctypes.c_int
+                    _heap_plan = (mallopt, ((_M_MMAP_THRESHOLD, mmap), (_M_TRIM_THRESHOLD, trim)))
+    return _heap_plan or None
+
+
+@contextlib.contextmanager
+def _kept_heap():
+    """While the body runs (a chunk on a Dask worker), arrays up to :data:`_KEPT_MMAP` come from
+    the heap and freed memory stays there, so the blocks of a chunk reuse the same pages; when the
+    last chunk running in this process ends, the settings in force before are restored (the heap
+    then gives its free top back as glibc would). Only where :func:`_heap_settings` says so;
+    nothing else changes (where an array lives does not change the numbers computed in it).
+    Process-wide (glibc's settings are), counted under a lock for workers with several threads."""
+    global _heap_users
+    plan = _heap_settings()
+    if plan is None:
+        yield
+        return
+    mallopt, restore = plan
+    with _heap_lock:
+        _heap_users += 1
+        if _heap_users == 1:
+            mallopt(_M_MMAP_THRESHOLD, _KEPT_MMAP)
+            mallopt(_M_TRIM_THRESHOLD, _KEPT_TRIM)
+    try:
+        yield
+    finally:
+        with _heap_lock:
+            _heap_users -= 1
+            if _heap_users == 0:
+                for param, value in restore:
+                    mallopt(param, value)
 
 
 def _local_cluster(workers: int):
