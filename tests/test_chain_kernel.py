@@ -101,7 +101,10 @@ def test_iteration_matches_the_dense_kernel(k, dense):
     rng = np.random.default_rng(k)
     kscale = np.abs(vm.K_theta).max()
     seen = set()
-    for eq in eqs:
+    for ie, eq in enumerate(eqs):
+        # the last state is the critical point itself, where ZᵀWZ is singular to rounding: the chain
+        # kernel may hand it to the dense one there (whose numbers are then compared as well)
+        at_critical = ie == len(eqs) - 1
         p_eq = s.kin.evaluate(eq.x, hessian=False).position
         for amp in (0.0, 1e-5, 1e-3):
             x = eq.x.copy()
@@ -112,7 +115,8 @@ def test_iteration_matches_the_dense_kernel(k, dense):
                     head, consts, thr = kernel_args(s, x, p_t, follow)
                     a = head + (True, polish, True, True, _KERNEL_DUMMY[:8], consts)
                     d = dense(*a)
-                    c = chain_kernel.iterate(*a, dense=lambda *z: pytest.fail("dense fallback at a regular point"))
+                    c = chain_kernel.iterate(
+                        *a, dense=dense if at_critical else lambda *z: pytest.fail("dense fallback at a regular point"))
                     assert c[0] == d[0], (amp, follow, polish)
                     seen.add(d[0])
                     assert c[1:5] == pytest.approx(d[1:5], rel=1e-13, abs=0)  # kkt, ep, er, rs
@@ -126,9 +130,10 @@ def test_iteration_matches_the_dense_kernel(k, dense):
                         assert rel(c[7], d[7]) <= tol
                     if d[0] == kernel.CONVERGED:
                         top = d[8].max()
-                        assert c[8].shape == (1,)
-                        assert abs(c[8][0] - top) <= 1e-10 * abs(top) + 1e-14 * kscale
-                        assert (c[8][0] < -thr) == (top < -thr)
+                        # the top eigenvalue alone (the dense kernel's whole spectrum where it decided)
+                        assert c[8].shape == (1,) or (at_critical and c[8].shape == d[8].shape)
+                        assert abs(c[8].max() - top) <= 1e-10 * abs(top) + 1e-14 * kscale
+                        assert (c[8].max() < -thr) == (top < -thr)
     assert {kernel.CONTINUE, kernel.CONVERGED} <= seen
 
 

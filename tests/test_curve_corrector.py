@@ -43,7 +43,7 @@ def _close(a, b, rel=REL):
         assert float(np.abs(a[fin] - b[fin]).max()) <= rel * scale
 
 
-def _assert_same_curve(c, g):
+def _assert_same_curve(c, g, crit_rel=REL):
     assert len(c.points) == len(g.points)
     _close(c.deflections, g.deflections)
     _close(c.forces, g.forces)
@@ -56,11 +56,11 @@ def _assert_same_curve(c, g):
     assert [q.kind for q in c.critical] == [q.kind for q in g.critical]
     for q, r in zip(c.critical, g.critical):
         _close([q.force, q.deflection, q.stiffness_before, q.force_after],
-               [r.force, r.deflection, r.stiffness_before, r.force_after])
+               [r.force, r.deflection, r.stiffness_before, r.force_after], rel=crit_rel)
         # the stiffness just past a bifurcation, on the branch switched to: the switch amplifies the
         # rounding of the located point (paper-a-z: 3e-10 of stiffness_before between the two correctors
         # with the first-order predictor, 1.1e-9 with the second-order one, the forces equal to 1e-15)
-        _close([q.stiffness_after], [r.stiffness_after], rel=1e-8)
+        _close([q.stiffness_after], [r.stiffness_after], rel=max(1e-8, crit_rel))
         assert q.index == r.index
 
 
@@ -78,7 +78,9 @@ def test_fused_corrector_keeps_the_curve(jit, name, direction, md, steps):
     fused = _trace(vm, direction, md, steps, True)
     general = _trace(vm, direction, md, steps, False)
     assert fused.critical, "each case has a critical point (the fused path must go through it)"
-    _assert_same_curve(fused, general)
+    # an imperfect point (paper-b-z) is the root of dμ/ds at a flat maximum of μ: it moves with the
+    # rounding of μ (the two paths factor J differently), ~1e-7 (as tests/test_point_kernel.py says)
+    _assert_same_curve(fused, general, crit_rel=1e-6 if name == "paper-b-z" else REL)
 
 
 def _counting(monkeypatch):

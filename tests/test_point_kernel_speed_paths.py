@@ -291,6 +291,13 @@ def _eig_cases(rng):
     out.append(("near-double", _symmetric(rng, ev), 2))
     t = np.diag(rng.uniform(-1, 1, 12)) + np.diag(np.r_[1e-300, 0.5 * np.ones(10)], 1)
     out.append(("tridiagonal", t + np.triu(t, 1).T, 1))
+    # a curve's margin matrix near buckling: the top eigenvalue ~0, alone, the rest spread over
+    # −3000..−0.1 (Laguerre's method from far above the isolated top eigenvalue, then its rounding)
+    for top in (-2e-6, 3e-9, 0.0, -4e-2):
+        ev = np.r_[top, -np.geomspace(0.09, 3000.0, 17)]
+        out.append((f"margin{top:g}", _symmetric(rng, ev), 1))
+    ev = np.r_[1e-7, 1e-7 - 1e-12, -np.geomspace(0.09, 3000.0, 16)]  # a top pair 1e-12 apart, ‖a‖ 3000
+    out.append(("margin-near-double", _symmetric(rng, ev), 2))
     return out
 
 

@@ -299,7 +299,9 @@ def _top_eigpair(a):
     """The largest eigenvalue of the symmetric (n, n) ``a`` (lower triangle read; ``a`` is
     overwritten) and a unit eigenvector, for :func:`_point_loops` (compiled with it): Householder
     tridiagonalisation ``a = Q T Qᵀ`` (``4n³/3``; on both triangles, by rows), bisection (by quarters) on the Sturm count
-    of ``T`` from the Gershgorin bracket to LAPACK's tolerance ``max(2ε|λ|, ε‖T‖)``, inverse
+    of ``T`` from the Gershgorin bracket until the largest eigenvalue is alone in it, then Laguerre's
+    method on ``det(T − σI)`` from above (monotone; to LAPACK's tolerance ``max(2ε|λ|, ε‖T‖)``; a
+    multiple top eigenvalue is never alone: bisection to that tolerance), inverse
     iteration on ``T`` (partial pivoting, three solves from a fixed start) and ``Q`` applied to
     the vector — instead of every eigenpair
     (``np.linalg.eigh``): the value to a few units of ``ε‖a‖`` as LAPACK's, the vector to
@@ -384,8 +386,13 @@ def _top_eigpair(a):
         lo -= 2.0 * eps * tnorm
         hi += 2.0 * eps * tnorm
         atol = max(eps * tnorm, pivmin)  # LAPACK's (dstebz) default absolute tolerance
+        clo = 0  # eigenvalues below lo (the Gershgorin bound: none)
+        newton = False
         for _ in range(200):
             if hi - lo <= max(2.0 * eps * max(abs(lo), abs(hi)), atol):
+                break
+            if clo == n - 1:  # the top eigenvalue alone in (lo, hi]: Laguerre's method from above
+                newton = True
                 break
             # quadrisection: three independent Sturm counts (their division chains overlap)
             w4 = 0.25 * (hi - lo)
@@ -422,11 +429,76 @@ def _top_eigpair(a):
                 hi = s1
             elif c2 == n:
                 lo, hi = s1, s2
+                clo = c1
             elif c3 == n:
                 lo, hi = s2, s3
+                clo = c2
             else:
                 lo = s3
+                clo = c3
         lam = 0.5 * (lo + hi)
+        if newton:
+            # Laguerre's method on det(T − σI) = Π(λ_j − σ) from σ = hi, which has no root above λ_max:
+            # it decreases monotonically to λ_max (cubically once close, fast from far: exact for one
+            # root apart from a multiple one): σ − N/(G + √((N−1)(N·H − G²))), G = Σ_j 1/(σ − λ_j),
+            # H = Σ_j 1/(σ − λ_j)², both by the pivots' recurrence (q_i = d_i − σ − e²/q_{i−1}:
+            # G = Σ q_i'/q_i, H = Σ (q_i'/q_i)² − q_i''/q_i). The same pass counts the negative pivots
+            # (the Sturm count): an iterate below λ_max (an overshoot in rounding) becomes the lower end
+            # of the bracket and the iteration bisects (lo, up), ``up`` the last iterate above λ_max
+            sig = hi
+            up = hi
+            prev = np.inf
+            nn = float(n)
+            for _ in range(80):
+                q = d[0] - sig
+                if abs(q) < pivmin:
+                    q = -pivmin
+                cnt = 1 if q < 0 else 0
+                dq = -1.0
+                d2q = 0.0
+                g = dq / q
+                h2 = g * g
+                for i in range(1, n):
+                    e2 = e[i - 1] * e[i - 1]
+                    r = 1.0 / q
+                    rr = r * r
+                    d2q = e2 * (d2q * rr - 2.0 * dq * dq * rr * r)
+                    dq = -1.0 + e2 * dq * rr
+                    q = d[i] - sig - e2 * r
+                    if abs(q) < pivmin:
+                        q = -pivmin
+                    if q < 0:
+                        cnt += 1
+                    t = dq / q
+                    g += t
+                    h2 += t * t - d2q / q
+                if cnt < n:  # λ_max above σ: bisect the bracket
+                    lo = sig
+                    prev = np.inf
+                    sig = 0.5 * (lo + up)
+                    lam = sig
+                    if not (lo < sig < up) or up - lo <= max(2.0 * eps * max(abs(lo), abs(up)), atol):
+                        break
+                    continue
+                up = sig
+                disc = (nn - 1.0) * (nn * h2 - g * g)
+                den = g + np.sqrt(disc if disc > 0.0 else 0.0)
+                step = nn / den if den > 0.0 else np.inf
+                tol = max(2.0 * eps * abs(sig), atol)
+                lam = sig
+                if step <= tol or (step <= 1e3 * tol and step > 0.5 * prev):
+                    # converged, or no longer converging fast (the step is the recurrence's rounding)
+                    if lo < sig - step:
+                        lam = sig - step
+                    break
+                prev = step
+                new = sig - step
+                if not (lo < new < sig):
+                    new = 0.5 * (lo + sig)
+                    prev = np.inf
+                    if not (lo < new < sig):
+                        break
+                sig = new
     # inverse iteration on T − λI (tridiagonal LU with partial pivoting, pivots floored)
     floor = max(eps * tnorm, 1e-300)
     y = np.empty(n)
