@@ -18,6 +18,7 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
+from tests.exact_eq28 import eq28_exact
 from vjm_pin.analysis import curve as curve_mod
 from vjm_pin.analysis import point_kernel as pk
 from vjm_pin.analysis.curve import _complement_rows, _direction, _stiffness_along, trace_curve
@@ -277,36 +278,6 @@ def test_top_eigenpair_matches_lapack(compiled_):
 
 
 # --------------------------------------------------------------------------- the corrector's own QR
-def _eq28_exact(jac, a, dt):
-    """``(δx, δF)`` of eq. (28), ``J δx = d_t``, ``Jᵀ δF + A δx = 0`` (``A = H − K``), solved exactly in
-    rational arithmetic from the given float64 entries (Gaussian elimination on ``Fraction``: the
-    reference the float solvers' rounding is measured against)."""
-    m, n = jac.shape
-    e = m + n
-    rows = [[Fraction(0)] * (e + 1) for _ in range(e)]
-    for r in range(m):
-        for c in range(n):
-            rows[r][m + c] = rows[m + c][r] = Fraction(float(jac[r, c]))
-        rows[r][e] = Fraction(float(dt[r]))
-    for i in range(n):
-        for j in range(n):
-            rows[m + i][m + j] = Fraction(float(a[i, j]))
-    for k in range(e):
-        p = next(i for i in range(k, e) if rows[i][k] != 0)
-        rows[k], rows[p] = rows[p], rows[k]
-        rk = rows[k]
-        for i in range(k + 1, e):
-            f = rows[i][k] / rk[k]
-            if f:
-                ri = rows[i]
-                for j in range(k, e + 1):
-                    ri[j] -= f * rk[j]
-    sol = [Fraction(0)] * e
-    for i in range(e - 1, -1, -1):
-        sol[i] = (rows[i][e] - sum(rows[i][j] * sol[j] for j in range(i + 1, e))) / rows[i][i]
-    return sol[m:], sol[:m]
-
-
 def _corrector_points(name, direction, max_deflection, steps, monkeypatch):
     """The compiled tracer's converged corrector answers of a short curve (each with the prediction it
     started from and the continuity limit), the tracer and the curve."""
@@ -377,7 +348,7 @@ def test_point_on_the_correctors_qr_matches_the_recomputing_kernels(name, direct
         # from the same J, H and K: within the forward error bound of a backward-stable solve, and over
         # the curve as close as the recomputing kernel's equilibrated inverse
         jac = jfree[kern.task]
-        xe, fe = _eq28_exact(jac, kf[6] - kz, kern.dt)
+        xe, fe = eq28_exact(jac, kf[6] - kz, kern.dt)
         ke = float(sum(Fraction(float(v)) * f for v, f in zip(kern.dt, fe)))
         xs = np.array([float(v) for v in xe])
         fs = np.array([float(v) for v in fe])

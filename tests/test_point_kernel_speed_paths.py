@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tests.exact_eq28 import eq28_exact
 from vjm_pin.analysis import point_kernel as pk
 from vjm_pin.solver.stiffness import SINGULAR_RCOND, _inverse_if_regular, _ruiz
 
@@ -144,34 +145,6 @@ def test_tangent_declines_a_singular_matrix_without_raising(jit, kind):
 
 
 # --------------------------------------------------------------------------- the null-space tangent
-def _exact_eq28(jac, a, dt):
-    """``(δx, δF)`` of ``J δx = d_t``, ``Jᵀ δF + A δx = 0`` in rational arithmetic from the float64 entries."""
-    from fractions import Fraction
-
-    m, n = jac.shape
-    e = m + n
-    rows = [[Fraction(0)] * (e + 1) for _ in range(e)]
-    for r in range(m):
-        for c in range(n):
-            rows[r][m + c] = rows[m + c][r] = Fraction(float(jac[r, c]))
-        rows[r][e] = Fraction(float(dt[r]))
-    for i in range(n):
-        for j in range(n):
-            rows[m + i][m + j] = Fraction(float(a[i, j]))
-    for k in range(e):
-        p = max(range(k, e), key=lambda i: abs(rows[i][k]))
-        rows[k], rows[p] = rows[p], rows[k]
-        for i in range(k + 1, e):
-            f = rows[i][k] / rows[k][k]
-            if f:
-                for j in range(k, e + 1):
-                    rows[i][j] -= f * rows[k][j]
-    sol = [Fraction(0)] * e
-    for i in range(e - 1, -1, -1):
-        sol[i] = (rows[i][e] - sum(rows[i][j] * sol[j] for j in range(i + 1, e))) / rows[i][i]
-    return np.array([float(v) for v in sol[m:]]), np.array([float(v) for v in sol[:m]])
-
-
 @pytest.mark.parametrize("m,nt,nq,sing", [(3, 18, 2, 0.0), (1, 4, 1, 0.0), (6, 6, 3, 0.0), (3, 18, 2, 1e-6)])
 def test_null_space_tangent_against_the_exact_solution(jit, m, nt, nq, sing):
     """``_ns_tangent`` on the Householder QR of ``Jᵀ`` (the corrector's ``_qr_t``) against eq. (28) solved in
@@ -189,7 +162,7 @@ def test_null_space_tangent_against_the_exact_solution(jit, m, nt, nq, sing):
         xd, fd, wt = np.zeros(n), np.zeros(m), np.empty((n, n))
         ok, k = jit._ns_tangent(jac, hh, hz, kz, dt, xd, fd, wt)
         assert ok
-        xe, fe = _exact_eq28(jac, hz - kz, dt)
+        xe, fe = (np.array([float(v) for v in part]) for part in eq28_exact(jac, hz - kz, dt))
         big = np.block([[np.zeros((m, m)), jac], [jac.T, hz - kz]])
         s_eq, d = _ruiz(big)
         tol = 100.0 * EPS * np.linalg.cond(s_eq) * np.abs(np.r_[fe, xe] / d).max()

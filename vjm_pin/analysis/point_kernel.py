@@ -762,11 +762,7 @@ def _ns_solve(hh, rmat, wt, lu, piv, ry, rx, xd, fd):
         for j in range(i):
             s -= lu[i, j] * u[j]
         u[i] = s
-    for i in range(nz - 1, -1, -1):
-        s = u[i]
-        for j in range(i + 1, nz):
-            s -= lu[i, j] * u[j]
-        u[i] = s / lu[i, i]
+    u = _back_substitute(lu, u, nz)  # U u = y
     sv = np.empty(m)
     for i in range(m):
         s = qx[i]
@@ -775,11 +771,7 @@ def _ns_solve(hh, rmat, wt, lu, piv, ry, rx, xd, fd):
         for j in range(nz):
             s += wt[m + j, i] * u[j]
         sv[i] = s
-    for i in range(m - 1, -1, -1):
-        s = sv[i]
-        for j in range(i + 1, m):
-            s -= rmat[i, j] * fd[j]
-        fd[i] = s / rmat[i, i]
+    fd[:] = _back_substitute(rmat, sv, m)  # R δF = sv
     for i in range(m):
         xd[i] = p[i]
     for j in range(nz):
