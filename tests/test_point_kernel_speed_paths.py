@@ -291,6 +291,15 @@ def test_top_eigenpair_matches_eigh(jit):
             gap = ev[-mult] - ev[-mult - 1]
             outside = np.linalg.norm(v - top @ (top.T @ v))
             assert outside <= 10.0 * n * EPS * scale / gap, (name, outside)
+        # a predicted bracket (the tracer's, from the previous point): right, too narrow, wrong on
+        # either side, around the second eigenvalue: the same eigenvalue to the same tolerance
+        span = max(ev[-1] - ev[0], scale * 1e-3)
+        for lo_, hi_ in ((ev[-1] - 1e-3 * span, ev[-1] + 1e-3 * span), (ev[-1] - 1e-15, ev[-1] + 1e-15),
+                         (ev[-1] + 0.1 * span, ev[-1] + 0.2 * span), (ev[-1] - 0.2 * span, ev[-1] - 0.1 * span),
+                         (ev[0] - 1.0, ev[-1] + 1.0), (ev[-2 if n > 1 else -1] - 1e-9 * span, ev[-1] - 1e-9 * span)):
+            lam_h, v_h = jit._top_eigpair(a.copy(), lo_, hi_)
+            assert abs(lam_h - ev[-1]) <= 4.0 * n * EPS * scale, (name, lo_, hi_, lam_h - ev[-1])
+            assert np.linalg.norm(a @ v_h - lam_h * v_h) <= 10.0 * n * EPS * scale, name
         # the python function: the same numbers to rounding
         lam2, v2 = jit._top_eigpair.py_func(a.copy())
         assert abs(lam2 - lam) <= 4.0 * EPS * scale, name

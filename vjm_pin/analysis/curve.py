@@ -142,6 +142,9 @@ _new_object = object.__new__
 _fast_points = True
 #: Private switch (False: dμ/ds by the forward difference of :meth:`_Tracer.dmu` everywhere).
 _analytic_rate = True
+#: Private switch (False: the point kernel's top eigenvalue from the Gershgorin bracket every time;
+#: True: from a bracket predicted by the previous point's μ and dμ/ds where the Sturm counts confirm it).
+_mu_hint = True
 #: Private switch (True: the second-order predictor along the followed branch, used only with
 #: ``_fast_points``). On by default since it is compiled with the first-order one (the fused step's
 #: ``_predict2_loops``): on the Model C curve ~1 Newton iteration fewer on ~40 % of the points
@@ -831,6 +834,16 @@ class _Tracer:
             pa = self._rargs
             nq = self._nq
             out = np.empty(nq + 6)
+            cfl = pa[2]
+            mu0, rate0 = a.mu, a.dmu
+            if _mu_hint and rate0 is not None and rate0 == rate0 and mu0 == mu0:
+                # μ's bracket predicted from the point continued from (μ + δs·dμ/ds, ± twice the move
+                # and 1e-6 of |μ|): the kernel keeps what the Sturm counts confirm
+                ds = s - a.s
+                half = 2.0 * abs(ds * rate0) + 1e-6 * abs(mu0) + 1e-300
+                cfl[-2], cfl[-1] = mu0 + ds * rate0 - half, mu0 + ds * rate0 + half
+            else:
+                cfl[-2] = cfl[-1] = math.nan
             try:
                 st, k, mu, rate, force = pa[0](raw[0], x_pred, CORRECTOR_RATIO * move + 1e-9, raw[3].jacobian, kf[1],
                                                kf[6], kf[7], pa[1], pa[2], pa[3], pa[4], out)
@@ -890,7 +903,7 @@ class _Tracer:
         if ok:
             rate = self.mask is not None
             ci = np.concatenate([[pk.n, pk.nt, pk.m, int(rate)], self.free, pk.task]).astype(np.int64)
-            cfl = np.concatenate([[FAST_RANK, SINGULAR_RCOND], self.d, pk.dt, self.var_scale]).astype(float)
+            cfl = np.concatenate([[FAST_RANK, SINGULAR_RCOND], self.d, pk.dt, self.var_scale, [np.nan, np.nan]])
             self._rargs = (fn, ci, cfl, pk.kz, self.mask if rate else pk._nomask)
 
     def reach(self, a: _BP, s: float) -> _BP | None:

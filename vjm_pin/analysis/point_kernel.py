@@ -295,7 +295,7 @@ class PointKernel:
 
 
 # --------------------------------------------------------------------------- compiled twin
-def _top_eigpair(a):
+def _top_eigpair(a, hlo=np.nan, hhi=np.nan):
     """The largest eigenvalue of the symmetric (n, n) ``a`` (lower triangle read; ``a`` is
     overwritten) and a unit eigenvector, for :func:`_point_loops` (compiled with it): Householder
     tridiagonalisation ``a = Q T Qᵀ`` (``4n³/3``; on both triangles, by rows), bisection (by quarters) on the Sturm count
@@ -305,7 +305,9 @@ def _top_eigpair(a):
     iteration on ``T`` (partial pivoting, three solves from a fixed start) and ``Q`` applied to
     the vector — instead of every eigenpair
     (``np.linalg.eigh``): the value to a few units of ``ε‖a‖`` as LAPACK's, the vector to
-    ``ε‖a‖/gap`` (in a multiple top eigenvalue some unit vector of its eigenspace)."""
+    ``ε‖a‖/gap`` (in a multiple top eigenvalue some unit vector of its eigenspace). ``(hlo, hhi)``: a
+    predicted bracket of the largest eigenvalue (NaN: none), each end used where the Sturm count
+    confirms it (one pass for both), so a wrong prediction costs that pass and nothing else."""
     n = a.shape[0]
     d = np.zeros(n)
     e = np.zeros(n)
@@ -387,6 +389,32 @@ def _top_eigpair(a):
         hi += 2.0 * eps * tnorm
         atol = max(eps * tnorm, pivmin)  # LAPACK's (dstebz) default absolute tolerance
         clo = 0  # eigenvalues below lo (the Gershgorin bound: none)
+        if lo < hlo < hhi < hi:
+            # a predicted bracket (the caller's: the previous point's μ moved along its rate), kept
+            # only as far as the Sturm counts confirm it: hhi an upper bound when every eigenvalue is
+            # below it, hlo a lower one when some eigenvalue is above it
+            c1 = 0
+            c3 = 0
+            q1 = d[0] - hlo
+            q3 = d[0] - hhi
+            for i in range(n):
+                if i > 0:
+                    e2 = e[i - 1] * e[i - 1]
+                    q1 = d[i] - hlo - e2 / q1
+                    q3 = d[i] - hhi - e2 / q3
+                if abs(q1) < pivmin:
+                    q1 = -pivmin
+                if abs(q3) < pivmin:
+                    q3 = -pivmin
+                if q1 < 0:
+                    c1 += 1
+                if q3 < 0:
+                    c3 += 1
+            if c3 == n:
+                hi = hhi
+            if c1 < n:
+                lo = hlo
+                clo = c1
         newton = False
         for _ in range(200):
             if hi - lo <= max(2.0 * eps * max(abs(lo), abs(hi)), atol):
@@ -884,7 +912,7 @@ def _point_loops(jfree, hz, kz, task, dt, mask, wrench, nt, use_rate, fast_rank,
         return 1, nan, xd, fd, nan, nan
     hh = _qr_t(jac, m, n)
     st, mu, rate = _margin_tail(jfree, hh, hz, kz, task, dt, mask, wrench, use_rate, fast_rank, xd, fd,
-                                np.empty((0, 0)))
+                                np.empty((0, 0)), np.nan, np.nan)
     return st, k, xd, fd, mu, rate
 
 
@@ -1029,7 +1057,7 @@ def _q_both_sides(hh, a, m, n):
     return at
 
 
-def _margin_tail(jfree, hh, hz, kz, task, dt, mask, wrench, use_rate, fast_rank, xd, fd, wt):
+def _margin_tail(jfree, hh, hz, kz, task, dt, mask, wrench, use_rate, fast_rank, xd, fd, wt, hlo, hhi):
     """The margin ``μ`` and, with ``use_rate``, ``dμ/ds`` of the point kernels (:func:`_point_loops`,
     :func:`_reuse_point_loops`) from the reflectors ``hh`` of ``Jᵀ`` (:func:`~vjm_pin.solver.kernel._qr_t`) and the
     tangent ``(xd, fd)``: the rank test of ``J`` (:data:`FAST_RANK`; from ``‖R‖_F ‖R⁻¹‖_F ≥ σ_max/σ_min``
@@ -1092,7 +1120,7 @@ def _margin_tail(jfree, hh, hz, kz, task, dt, mask, wrench, use_rate, fast_rank,
         bq = asym.copy()
         bt = _q_both_sides(hh, bq, m, n)
     red = _reduced(bt, uh, m, n)
-    mu, top = _top_eigpair(red)
+    mu, top = _top_eigpair(red, hlo, hhi)
     if not use_rate:
         return 0, mu, nan
     w = np.empty(n)  # V top = Q [û top[−1]; top[:n−m]]
@@ -1121,7 +1149,9 @@ def _reuse_point_loops(x, x_pred, limit, j6, hh, hz, f6, ci, cfl, kz, mask, out)
     the same ``Jᵀ``: another basis of the same subspaces; ``Qᵀ(H − K)Q`` from the tangent's matrix).
 
     The constants packed (one argument each instead of eleven): ``ci`` (int) = ``[n, nθ, m, use_rate,
-    free (n), task (m)]``, ``cfl`` (float) = ``[fast_rank, sing_rcond, d (6), d_t (m), vscale (n)]``; ``out``
+    free (n), task (m)]``, ``cfl`` (float) = ``[fast_rank, sing_rcond, d (6), d_t (m), vscale (n), μ_lo, μ_hi]``
+    (the last two: a predicted bracket of μ for :func:`_top_eigpair`, written by the caller before each
+    call, NaN for none); ``out``
     (nq + 6,): the tangent ``(δx, δF)`` laid out as ``x_dot`` (nq,) then ``w_dot`` (6,). Returns
     ``(status, k, μ, dμ/ds, dᵀF)``: as :func:`_fused_point_loops` (status −1: the corrector strayed,
     nothing else done; 1: the kernel declines; 0: every number valid) and the force along ``d`` of
@@ -1156,7 +1186,9 @@ def _reuse_point_loops(x, x_pred, limit, j6, hh, hz, f6, ci, cfl, kz, mask, out)
     ok, k = _ns_tangent(jac, hh, hz, kz, dt, xd, fd, wt)
     if not ok:
         return 1, nan, nan, nan, force
-    st, mu, rate = _margin_tail(jfree, hh, hz, kz, task, dt, mask, f6, use_rate, fast_rank, xd, fd, wt)
+    nc = cfl.shape[0]  # the predicted bracket of μ, when the caller wrote one (else NaN)
+    st, mu, rate = _margin_tail(jfree, hh, hz, kz, task, dt, mask, f6, use_rate, fast_rank, xd, fd, wt,
+                                cfl[nc - 2], cfl[nc - 1])
     if st:
         return 1, nan, nan, nan, force
     nq = out.shape[0] - 6
