@@ -295,6 +295,24 @@ class PointKernel:
 
 
 # --------------------------------------------------------------------------- compiled twin
+def _sturm_count(d, e, s, pivmin):
+    """The number of eigenvalues below ``s`` of the symmetric tridiagonal matrix with diagonal ``d``
+    and off-diagonal ``e`` (``e[i]`` couples ``i`` and ``i + 1``): the negative pivots of ``T − sI``,
+    pivots below ``pivmin`` in size taken as ``−pivmin`` (``dstebz``'s rule; the recurrence the
+    quadrisection of :func:`_top_eigpair` runs three at a time, side by side)."""
+    n = d.shape[0]
+    c = 0
+    q = d[0] - s
+    for i in range(n):
+        if i > 0:
+            q = d[i] - s - e[i - 1] * e[i - 1] / q
+        if abs(q) < pivmin:
+            q = -pivmin
+        if q < 0:
+            c += 1
+    return c
+
+
 def _top_eigpair(a, hlo=np.nan, hhi=np.nan):
     """The largest eigenvalue of the symmetric (n, n) ``a`` (lower triangle read; ``a`` is
     overwritten) and a unit eigenvector, for :func:`_point_loops` (compiled with it): Householder
@@ -393,25 +411,9 @@ def _top_eigpair(a, hlo=np.nan, hhi=np.nan):
             # a predicted bracket (the caller's: the previous point's μ moved along its rate), kept
             # only as far as the Sturm counts confirm it: hhi an upper bound when every eigenvalue is
             # below it, hlo a lower one when some eigenvalue is above it
-            c1 = 0
-            c3 = 0
-            q1 = d[0] - hlo
-            q3 = d[0] - hhi
-            for i in range(n):
-                if i > 0:
-                    e2 = e[i - 1] * e[i - 1]
-                    q1 = d[i] - hlo - e2 / q1
-                    q3 = d[i] - hhi - e2 / q3
-                if abs(q1) < pivmin:
-                    q1 = -pivmin
-                if abs(q3) < pivmin:
-                    q3 = -pivmin
-                if q1 < 0:
-                    c1 += 1
-                if q3 < 0:
-                    c3 += 1
-            if c3 == n:
+            if _sturm_count(d, e, hhi, pivmin) == n:
                 hi = hhi
+            c1 = _sturm_count(d, e, hlo, pivmin)
             if c1 < n:
                 lo = hlo
                 clo = c1
@@ -1210,7 +1212,7 @@ _fused = None  # the compiled (_predict_loops, _fused_point_loops, _scaled_diff,
 _compiled = None  # the compiled _point_loops once loaded, False when numba is unavailable
 _reuse = None  # the compiled _reuse_point_loops once loaded (compiled())
 #: This module's njit helpers, compiled (before the kernels that call them) by compiled().
-_OWN_HELPERS = ("_top_eigpair", "_abs_sums", "_eq28_tangent", "_reduced", "_rate_value", "_householder_r",
+_OWN_HELPERS = ("_sturm_count", "_top_eigpair", "_abs_sums", "_eq28_tangent", "_reduced", "_rate_value", "_householder_r",
                 "_q_both_sides", "_margin_tail", "_lu_factor", "_ns_solve", "_ns_tangent")
 #: The dense kernel's helpers (:mod:`vjm_pin.solver.kernel`) this module calls, compiled there once
 #: (numba's on-disk cache of this module does not see edits of kernel.py: clear ``__pycache__`` then).
