@@ -82,14 +82,13 @@ def test_layout_keys_are_equal_only_when_every_byte_is(monkeypatch):
     s = EquilibriumSolver(vm)
     nt, free, mask = s.nt, s.free, s.kin.support_mask(s.free)
     kz = np.array(s._kz)
-    i = int(np.flatnonzero(np.abs(kz[:nt, :nt]).ravel() > 0)[5])  # a nonzero entry of K_θ
-    off = 8 * i  # its least significant byte (little endian) ...
-    while off % chain_kernel.KEY_HASH_STRIDE == 0:  # ... at an offset the hash skips
-        i += 1
-        off = 8 * i
+    st = chain_kernel.KEY_SAMPLE_STEP
+    rows, cols = np.nonzero(kz[:nt, :nt])  # the nonzero entries of K_θ ...
+    skipped = (rows % st != 0) | (cols % st != 0)  # ... that the hash does not sample
+    i = int(np.ravel_multi_index((rows[skipped][5], cols[skipped][5]), (nt, nt)))
     kt = np.ascontiguousarray(kz[:nt, :nt])
     raw = bytearray(kt.tobytes())
-    raw[off] ^= 1  # one bit of one entry: a relative change ~1e-16
+    raw[8 * i] ^= 1  # the least significant bit (little endian) of one entry: a relative change ~1e-16
     kz2 = kz.copy()
     kz2[:nt, :nt] = np.frombuffer(bytes(raw), float).reshape(nt, nt)
     assert not np.array_equal(kz, kz2) and np.allclose(kz, kz2, rtol=1e-15, atol=0)
@@ -104,3 +103,14 @@ def test_layout_keys_are_equal_only_when_every_byte_is(monkeypatch):
     fresh = chain_kernel._Layout(kz2, free, nt, mask)
     assert np.array_equal(lb.kp, fresh.kp) and np.array_equal(lb.kd, fresh.kd)
     assert not np.array_equal(la.kd, lb.kd)
+    # a signed zero is another bit pattern (the pseudo-inverses could carry it): another key
+    kz3 = kz.copy()
+    r0, c0 = np.argwhere(kz[:nt, :nt] == 0)[0]
+    kz3[r0, c0] = -0.0
+    assert chain_kernel._content_key(kz3, free, nt, mask) != k1
+    # the cache keeps its own copies: the caller's K_θ edited in place afterwards is another model
+    kz4 = kz.copy()
+    assert chain_kernel._layout(np.zeros(1), kz4, free, nt, mask) is la
+    kz4[rows[0], cols[0]] *= 2.0
+    assert chain_kernel._layout(np.zeros(1), kz4, free, nt, mask) is not la
+    assert chain_kernel._layout(np.zeros(1), kz.copy(), free, nt, mask) is la

@@ -1432,34 +1432,71 @@ SHARED_MAX = 8
 SHARED_MAX_BYTES = 1 << 26
 
 
-#: :class:`_ContentKey` hashes every this-many-th byte of ``K_θ`` and of the support mask.
-KEY_HASH_STRIDE = 61
+#: :class:`_ContentKey` hashes every this-many-th row and column of ``K_θ`` and of the support mask.
+KEY_SAMPLE_STEP = 7
 
 
-class _ContentKey(tuple):
-    """A :func:`_content_key`: a tuple ``(shapes, K_θ bytes, free bytes, mask bytes)`` that is
-    equal to another only when all of its bytes are (tuple equality), hashed from a sample of the
-    two large byte strings (every :data:`KEY_HASH_STRIDE`-th byte, and all of the shapes and free
-    coordinates): hashing the whole ~0.2 MB key took ~50 µs per fresh solver at n = 144, and keys
-    that share the hash only cost an equality test."""
+def _bits(a: np.ndarray) -> np.ndarray:
+    """``a`` (float or bool) as unsigned integers of its own width (a view): compared bit for bit
+    (``-0.0 != 0.0``, a NaN equal to itself), as bytes would be."""
+    return a.view(np.uint64 if a.dtype.itemsize == 8 else np.uint8)
 
-    __slots__ = ()
+
+class _ContentKey:
+    """A :func:`_content_key`: ``K_θ``, the free coordinates and the support mask of a layout,
+    equal to another only when every bit of the three is (compared in place, no copies), hashed
+    from their shapes, the free coordinates and a sample of the two square arrays (every
+    :data:`KEY_SAMPLE_STEP`-th row and column). A probe key holds views of its caller's arrays; a
+    key kept in the cache holds copies (:meth:`kept`). Copying and hashing the whole ~0.2 MB of
+    bytes took ~50–200 µs per fresh solver at n = 144 (a page-faulting copy); keys that share
+    the hash only cost the comparison."""
+
+    __slots__ = ("shape", "kt", "free", "mask", "_hash")
+
+    def __init__(self, shape, kt, free, mask):
+        self.shape, self.kt, self.free, self.mask = shape, kt, free, mask
+        st = KEY_SAMPLE_STEP
+        self._hash = hash((
+            shape, free.tobytes(), kt[::st, ::st].tobytes(), b"" if mask is None else mask[::st, ::st].tobytes()
+        ))
 
     def __hash__(self):
-        st = KEY_HASH_STRIDE
-        return hash((self[0], self[1][::st], self[2], self[3][::st]))
+        return self._hash
+
+    def __eq__(self, other):
+        if not isinstance(other, _ContentKey):
+            return NotImplemented
+        return (
+            self._hash == other._hash
+            and self.shape == other.shape
+            and np.array_equal(self.free, other.free)
+            and np.array_equal(_bits(self.kt), _bits(other.kt))
+            and (self.mask is None or np.array_equal(self.mask, other.mask))
+        )
+
+    @property
+    def nbytes(self) -> int:
+        return self.kt.nbytes + self.free.nbytes + (0 if self.mask is None else self.mask.nbytes)
+
+    def kept(self) -> "_ContentKey":
+        """This key with its own copies of the arrays (for the cache: the caller's may change)."""
+        k = object.__new__(_ContentKey)
+        k.shape, k._hash = self.shape, self._hash
+        k.kt, k.free = self.kt.copy(), self.free.copy()
+        k.mask = None if self.mask is None else self.mask.copy()
+        return k
 
 
-def _content_key(kz, free, nt, mask) -> tuple:
-    """Everything a :class:`_Layout` is computed from, as bytes: ``K_θ = kz[:nt, :nt]``, the
-    free coordinates and the support mask (their shapes and element types fixed by the
-    conversions), so equal models share a layout and models that differ in any entry do not
-    (a :class:`_ContentKey`)."""
-    kt = np.ascontiguousarray(kz[:nt, :nt], float)
+def _content_key(kz, free, nt, mask) -> _ContentKey:
+    """Everything a :class:`_Layout` is computed from: ``K_θ = kz[:nt, :nt]``, the free
+    coordinates and the support mask (their shapes and element types fixed by the conversions),
+    so equal models share a layout and models that differ in any bit do not (a
+    :class:`_ContentKey` of views where no conversion is needed)."""
+    kt = np.asarray(kz, float)[:nt, :nt]
     fr = np.ascontiguousarray(free, np.int64)
-    mk = b"" if mask is None else np.ascontiguousarray(mask, np.bool_).tobytes()
-    shape = (int(nt), fr.shape[0], kt.shape, None if mask is None else np.shape(mask))
-    return _ContentKey((shape, kt.tobytes(), fr.tobytes(), mk))
+    mk = None if mask is None else np.asarray(mask, np.bool_)
+    shape = (int(nt), fr.shape[0], kt.shape, None if mask is None else mk.shape)
+    return _ContentKey(shape, kt, fr, mk)
 
 
 def _layout(key_obj, kz, free, nt, mask) -> _Layout:
@@ -1476,12 +1513,18 @@ def _layout(key_obj, kz, free, nt, mask) -> _Layout:
     if lay is None:
         lay = _Layout(kz, free, nt, mask)  # outside the lock: ~10 ms at n = 144
     with _LOCK:  # threads (a map's workers) share the caches
+        for k in _SHARED:  # the stored key (its own copies), if there is one
+            if k == key:
+                key = k
+                break
+        else:
+            key = key.kept()
         lay = _SHARED.pop(key, lay)  # another thread's equal layout, if it was first
         _SHARED[key] = lay  # (re)inserted last: the most recently used
-        size = sum(len(k[1]) + len(k[2]) + len(k[3]) for k in _SHARED)
+        size = sum(k.nbytes for k in _SHARED)
         while len(_SHARED) > 1 and (len(_SHARED) > SHARED_MAX or size > SHARED_MAX_BYTES):
             k = next(iter(_SHARED))
-            size -= len(k[1]) + len(k[2]) + len(k[3])
+            size -= k.nbytes
             del _SHARED[k]
         if len(_LAYOUTS) >= 32:
             _LAYOUTS.pop(next(iter(_LAYOUTS)))
