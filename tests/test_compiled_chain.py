@@ -250,3 +250,39 @@ def test_restoration_with_compiled_kinematics(fns, monkeypatch):
         jac = pin.computeFrameJacobian(s.kin.model, ref, xb, s.kin.frame_id, pin.LOCAL_WORLD_ALIGNED)
         np.testing.assert_allclose(stb.jacobian, jac, rtol=0, atol=1e-13)
         np.testing.assert_allclose(stb.position, ref.oMf[s.kin.frame_id].translation, rtol=0, atol=1e-14)
+
+
+def test_table_is_kept_while_the_model_is_unchanged():
+    """A second solver of the same model gets the same table object; a model edited in place
+    (a joint placement, the end frame's placement, a joint replaced) gets a new table, equal to
+    one read afresh from the edited model."""
+    model, fid = _unaligned_tree()
+    first = compiled_chain.chain_table(model, fid)
+    assert compiled_chain.chain_table(model, fid) is first
+    assert compiled_chain.chain_table(pin.Model(model), fid) is not first  # another object: read
+
+    def fresh():
+        return compiled_chain._read_table(model, fid)
+
+    def edits():
+        model.jointPlacements[2].translation[1] += 1e-12  # in place, through the reference
+        yield "joint placement"
+        frame = model.frames[fid]
+        pl = frame.placement
+        pl.rotation = pl.rotation @ pin.exp3(np.array([0.0, 0.0, 1e-9]))
+        frame.placement = pl
+        model.frames[fid] = frame
+        yield "frame placement"
+        model.joints[1] = pin.JointModelRY()
+        model.joints[1].setIndexes(1, model.idx_qs[1], model.idx_vs[1])
+        yield "joint model"
+
+    prev = first
+    for what in edits():
+        got = compiled_chain.chain_table(model, fid)
+        ref = fresh()
+        assert got is not prev, what
+        assert np.array_equal(got.geo, ref.geo) and np.array_equal(got.jinfo, ref.jinfo), what
+        assert not np.array_equal(got.geo, prev.geo) or not np.array_equal(got.jinfo, prev.jinfo), what
+        assert compiled_chain.chain_table(model, fid) is got, what
+        prev = got
