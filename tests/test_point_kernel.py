@@ -157,6 +157,28 @@ def test_compiled_and_numpy_kernels_agree():
         assert c[4] == pytest.approx(a[4], rel=1e-6, abs=1e-12 * scale)
 
 
+def test_kernel_on_the_solvers_k_theta_block_is_the_kernel_on_its_own():
+    """The tracer hands the point kernel the solver's ``K_θ ⊕ 0`` (no copy): the same points as a
+    kernel that builds its own, bit for bit; a block of another shape or type is refused."""
+    vm, d, solver, eqs = _equilibria("paper-c-s", [-1.0, 0.0, 0.0], 6e-4, 3)
+    dt = d[np.asarray(vm.task)]
+    own = pk.PointKernel(vm.K_theta, solver.free, dt, vm.task)
+    shared = pk.PointKernel(vm.K_theta, solver.free, dt, vm.task, kz=solver._kz)
+    assert np.array_equal(own.kz, shared.kz)
+    mask = solver.kin.support_mask(solver.free)
+    for eq in eqs:
+        b = blocks_at(vm, eq.x, eq.wrench, solver.kin)
+        for fn in (None, pk.compiled() or None):
+            a, c = own.point(b, mask, eq.wrench, fn), shared.point(b, mask, eq.wrench, fn)
+            assert (a is None) == (c is None)
+            if a is not None:
+                assert all(np.array_equal(u, v) for u, v in zip(a, c) if u is not None)
+    n = len(solver.free)
+    for bad in (np.zeros((n - 1, n)), np.zeros((n, n), np.float32)):
+        with pytest.raises(ValueError, match="kz must be"):
+            pk.PointKernel(vm.K_theta, solver.free, dt, vm.task, kz=bad)
+
+
 @pytest.mark.parametrize("kind,fn", _kernels())
 def test_rigid_start_is_left_to_the_generic_path(kind, fn):
     """Model A S unloaded: the straight chain of rigid links cannot move along x to first order

@@ -555,7 +555,8 @@ class _Tracer:
         self.h = self.range
         self.seg_margin = 0.0  # largest −μ on the current stretch of the followed branch
         # the per-point algebra in one pass where it is far from singular (point_kernel)
-        self.kernel = PointKernel(vm.K_theta, self.free, d[self.task], self.task) if _fast_points else None
+        kz = getattr(solver, "_kz", None)  # (K_θ ⊕ 0 of solver.free: shared, read only)
+        self.kernel = PointKernel(vm.K_theta, self.free, d[self.task], self.task, kz=kz) if _fast_points else None
         # dμ/ds analytically where the Hessian of Ψ is in screw form (else by a difference)
         self.mask = self.kin.support_mask(self.free) if _fast_points and getattr(self.kin, "uses_screw", False) else None
         self._fn = None  # the compiled point kernel once wanted (point_kernel.use_compiled)

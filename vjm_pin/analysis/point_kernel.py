@@ -60,6 +60,7 @@ to rounding.
 
 from __future__ import annotations
 
+import functools
 import sys
 
 import numpy as np
@@ -84,20 +85,35 @@ class PointKernel:
         free: (n,) the free coordinates (nθ + nq), ordered (θ, q) as the blocks.
         d_task: (m,) the direction's task rows.
         task: (m,) the task components (rows of the 6-D wrench), default ``0..m−1``.
+        kz: (n, n) ``K_θ ⊕ 0`` (``k_theta`` in the leading block, zeros elsewhere) when the
+            caller already holds it (the solver's, shared and only read: saves a copy of order
+            n² per curve); default built here.
     """
 
-    def __init__(self, k_theta: np.ndarray, free: np.ndarray, d_task: np.ndarray, task=None):
+    def __init__(self, k_theta: np.ndarray, free: np.ndarray, d_task: np.ndarray, task=None, kz=None):
         nt = k_theta.shape[0]
         n = len(free)
         self.free = np.asarray(free, dtype=int)
         self.task = np.arange(d_task.size) if task is None else np.asarray(task, dtype=int)
         self.n, self.nt, self.m = int(n), nt, int(d_task.size)
-        self.kz = np.zeros((n, n))
-        self.kz[:nt, :nt] = k_theta
+        if kz is None:
+            kz = np.zeros((n, n))
+            kz[:nt, :nt] = k_theta
+        elif kz.shape != (n, n) or kz.dtype != np.float64:
+            raise ValueError(f"PointKernel: kz must be a float ({n}, {n}) array, got {kz.dtype} {kz.shape}")
+        self.kz = kz
         self.dt = np.ascontiguousarray(d_task, dtype=float)
         self.big = n > SCIPY_LAPACK_MAX_N
-        self._qfull = np.zeros((n, n), order="F")
-        self._nomask = np.zeros((n, n), dtype=bool)
+
+    @functools.cached_property
+    def _qfull(self):
+        """(n, n) Fortran-ordered workspace of :meth:`factor` (LAPACK ``dorgqr``, n ≤ 48)."""
+        return np.zeros((self.n, self.n), order="F")
+
+    @functools.cached_property
+    def _nomask(self):
+        """(n, n) all-false support mask (the compiled kernels' argument without a mask)."""
+        return np.zeros((self.n, self.n), dtype=bool)
 
     # ------------------------------------------------------------------ pieces
     def matrices(self, b):

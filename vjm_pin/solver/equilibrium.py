@@ -550,11 +550,9 @@ class EquilibriumSolver:
         self._err_scale = np.where(np.array(self.task) < 3, self.length_scale, 1.0)
         self._rows_p = [i for i, t in enumerate(self.task) if t < 3]
         self._rows_r = [i for i, t in enumerate(self.task) if t >= 3]
-        # the fast local Newton path: (θ, q)-ordered gathers of J and H by precomputed indices
-        nv = vm.model.nv
+        # the fast local Newton path: K_θ ⊕ 0 in (θ, q) order (the gathers of H: _hidx)
         self._kz = np.zeros((len(self.free),) * 2)
         self._kz[: self.nt, : self.nt] = vm.K_theta
-        self._hidx = (self.free[:, None] * nv + self.free[None, :]).ravel()
         self._smask = self.kin.support_mask(self.free) if hasattr(self.kin, "support_mask") else None
         self._all_task = self.task == [0, 1, 2, 3, 4, 5]
         self._off_task = np.array([i for i in range(6) if i not in self.task], int)
@@ -594,6 +592,15 @@ class EquilibriumSolver:
         new._lean_ctx = None  # (its buffers are this solver's)
         new._fast_cond = None
         return new
+
+    def _hidx(self) -> np.ndarray:
+        """(n², ) flat indices of the (θ, q)-ordered block of a (nv, nv) matrix (the dense
+        Newton path's gather of the contracted Hessian), built on first use (order n²)."""
+        got = self.__dict__.get("_hidx_kept")
+        if got is None:
+            nv = self.vm.model.nv
+            got = self._hidx_kept = (self.free[:, None] * nv + self.free[None, :]).ravel()
+        return got
 
     # ----------------------------------------------------------------- helpers
     def energy(self, x: np.ndarray) -> float:
@@ -1266,7 +1273,7 @@ class EquilibriumSolver:
         if screw:
             hz = psi_hessian_screw(jfree, f6, self._smask)
         else:
-            hz = contract_hessian(st.hessian, f6).take(self._hidx).reshape(n, n)
+            hz = contract_hessian(st.hessian, f6).take(self._hidx()).reshape(n, n)
         return st, jac, qf, rr, f, r, tau, hz
 
     def _fast_error(self, st, pt, rt):
