@@ -1395,7 +1395,8 @@ def _load():
 class _Layout:
     """Per-model constants in chain order (from ``K_θ`` in (θ, q) order and the free columns)."""
 
-    __slots__ = ("cols", "dpos", "kd", "khi", "klo", "kp", "kscale", "ok", "order", "starts")
+    # (key: the _ContentKey it is kept under in _SHARED, set by _layout)
+    __slots__ = ("cols", "dpos", "kd", "khi", "key", "klo", "kp", "kscale", "ok", "order", "starts")
 
     def __init__(self, kz, free, nt, mask):
         from vjm_pin.solver.chain_algebra import chain_layout
@@ -1509,23 +1510,23 @@ def _layout(key_obj, kz, free, nt, mask) -> _Layout:
         return hit[3]
     key = _content_key(kz, free, nt, mask)
     with _LOCK:
-        lay = _SHARED.get(key)
+        lay = _SHARED.pop(key, None)  # (one comparison with the kept key on a hit)
+        if lay is not None:
+            _SHARED[lay.key] = lay  # reinserted last: the most recently used
     if lay is None:
-        lay = _Layout(kz, free, nt, mask)  # outside the lock: ~10 ms at n = 144
-    with _LOCK:  # threads (a map's workers) share the caches
-        for k in _SHARED:  # the stored key (its own copies), if there is one
-            if k == key:
-                key = k
-                break
-        else:
-            key = key.kept()
-        lay = _SHARED.pop(key, lay)  # another thread's equal layout, if it was first
-        _SHARED[key] = lay  # (re)inserted last: the most recently used
-        size = sum(k.nbytes for k in _SHARED)
-        while len(_SHARED) > 1 and (len(_SHARED) > SHARED_MAX or size > SHARED_MAX_BYTES):
-            k = next(iter(_SHARED))
-            size -= k.nbytes
-            del _SHARED[k]
+        built = _Layout(kz, free, nt, mask)  # outside the lock: ~10 ms at n = 144
+        with _LOCK:  # threads (a map's workers) share the caches
+            lay = _SHARED.pop(key, None)  # another thread's equal layout, if it was first
+            if lay is None:
+                lay = built
+                lay.key = key.kept()  # (its own copies: the caller's arrays may change)
+            _SHARED[lay.key] = lay
+            size = sum(k.nbytes for k in _SHARED)
+            while len(_SHARED) > 1 and (len(_SHARED) > SHARED_MAX or size > SHARED_MAX_BYTES):
+                k = next(iter(_SHARED))
+                size -= k.nbytes
+                del _SHARED[k]
+    with _LOCK:
         if len(_LAYOUTS) >= 32:
             _LAYOUTS.pop(next(iter(_LAYOUTS)))
         _LAYOUTS[id(key_obj)] = (key_obj, kz, mask, lay)

@@ -593,14 +593,11 @@ class EquilibriumSolver:
         new._fast_cond = None
         return new
 
+    @functools.cached_property
     def _hidx(self) -> np.ndarray:
         """(n², ) flat indices of the (θ, q)-ordered block of a (nv, nv) matrix (the dense
         Newton path's gather of the contracted Hessian), built on first use (order n²)."""
-        got = self.__dict__.get("_hidx_kept")
-        if got is None:
-            nv = self.vm.model.nv
-            got = self._hidx_kept = (self.free[:, None] * nv + self.free[None, :]).ravel()
-        return got
+        return (self.free[:, None] * self.vm.model.nv + self.free[None, :]).ravel()
 
     # ----------------------------------------------------------------- helpers
     def energy(self, x: np.ndarray) -> float:
@@ -1273,7 +1270,7 @@ class EquilibriumSolver:
         if screw:
             hz = psi_hessian_screw(jfree, f6, self._smask)
         else:
-            hz = contract_hessian(st.hessian, f6).take(self._hidx()).reshape(n, n)
+            hz = contract_hessian(st.hessian, f6).take(self._hidx).reshape(n, n)
         return st, jac, qf, rr, f, r, tau, hz
 
     def _fast_error(self, st, pt, rt):
