@@ -93,9 +93,10 @@ def test_straight_route_is_the_general_route(name, monkeypatch):
             kinds.add("gave way")
             continue
         kinds.add("converged")
-        x, f, it, st, kf, ev, res, stab = got
-        wx, wf, wit, wst, wkf, wev, wres, wstab = want
+        x, f, it, st, kf, ev, res, stab, wt = got
+        wx, wf, wit, wst, wkf, wev, wres, wstab, wwt = want
         assert _same(x, wx) and _same(f, wf) and it == wit and _same(kf, wkf) and _same(res, wres)
+        assert wt is not None and wt.shape == (len(base.free),) * 2 and (wwt is None or _same(wt, wwt))
         assert (ev is None) == (wev is None) and (ev is None or _same(ev, wev))
         assert _same(_state(st), _state(wst))
         assert _same(_verdict(stab), _verdict(wstab))

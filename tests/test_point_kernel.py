@@ -312,7 +312,8 @@ def _corrector_points(name, direction, max_deflection, steps, monkeypatch):
     def corrector(self, ctx, p_t, r_t, x, flushed=False):
         raw = original(self, ctx, p_t, r_t, x, flushed)
         if raw is not None:
-            raws.append((raw, np.array(x, float)))
+            # (the loop's (QᵀWQ)ᵀ is valid until the next call: kept as it was at this convergence)
+            raws.append((raw[:8] + (None if raw[8] is None else raw[8].copy(),), np.array(x, float)))
         return raw
 
     monkeypatch.setattr(Solver, "_corrector", corrector)
@@ -351,7 +352,8 @@ def test_point_on_the_correctors_qr_matches_the_recomputing_kernels(name, direct
         x, kf, j6 = raw[0], raw[4], raw[3].jacobian
         assert kf[1].shape == (kern.m + 1, kern.n)  # the compiled corrector's reflectors
         out = np.full(nq + 6, np.nan)
-        st, k, mu, rate, force = fn(x, x_pred, np.inf, j6, kf[1], kf[6], kf[7], ci, cfl, kz, mask, out)
+        st, k, mu, rate, force = fn(x, x_pred, np.inf, j6, kf[1], kf[6], kf[7], curve_mod._NO_WT, ci, cfl, kz, mask,
+                                    out)
         assert force == pytest.approx(float(tr.d @ kf[7]), rel=1e-15, abs=1e-300)
         jfree = np.ascontiguousarray(j6.take(tr.free, axis=1))
         want = pk.compiled()(jfree, kf[6], kz, kern.task, kern.dt, mask, kf[7], kern.nt, True, pk.FAST_RANK,
@@ -401,12 +403,13 @@ def test_point_on_the_correctors_qr_matches_the_recomputing_kernels(name, direct
         out2 = np.full(nq + 6, np.nan)
         corr = float(np.abs((x - x_pred)[tr.free] / tr.var_scale).max())
         if corr > 0:
-            assert fn(x, x_pred, corr * (1 - 1e-12), j6, kf[1], kf[6], kf[7], ci, cfl, kz, mask, out2)[0] == -1
+            assert fn(x, x_pred, corr * (1 - 1e-12), j6, kf[1], kf[6], kf[7], curve_mod._NO_WT, ci, cfl, kz, mask,
+                      out2)[0] == -1
             assert np.isnan(out2).all()
         # a rank test that cannot pass: declined
         cfl2 = cfl.copy()
         cfl2[0] = 2.0  # σ_min > 2 σ_max never holds
-        assert fn(x, x_pred, np.inf, j6, kf[1], kf[6], kf[7], ci, cfl2, kz, mask, out2)[0] == 1
+        assert fn(x, x_pred, np.inf, j6, kf[1], kf[6], kf[7], curve_mod._NO_WT, ci, cfl2, kz, mask, out2)[0] == 1
     assert checked >= len(raws) - 2
     new_err, old_err, ks = np.array(errs).T
     # as accurate as the equilibrated inverse: the two round differently (their largest errors over a
@@ -430,7 +433,7 @@ def test_rate_on_the_correctors_qr_matches_central_differences(monkeypatch):
     for raw, x_pred in raws:
         x, kf, j6 = raw[0], raw[4], raw[3].jacobian
         out = np.empty(nq + 6)
-        st, _, _, rate, _ = fn(x, x_pred, np.inf, j6, kf[1], kf[6], kf[7], ci, cfl, kz, mask, out)
+        st, _, _, rate, _ = fn(x, x_pred, np.inf, j6, kf[1], kf[6], kf[7], curve_mod._NO_WT, ci, cfl, kz, mask, out)
         if st:
             continue
         x_dot, w_dot = out[:nq], out[nq:]
@@ -452,6 +455,66 @@ def test_rate_on_the_correctors_qr_matches_central_differences(monkeypatch):
     for rate, best in rates:
         assert best <= 2e-5 * abs(rate) + 2e-9 * big, (rate, best)
     assert len(rates) >= 4 and min(abs(r) for r, _ in rates) < 1e-3 * big  # both kinds checked
+
+
+@pytest.mark.parametrize("name,direction,max_deflection,steps", REUSE_CASES, ids=[c[0] for c in REUSE_CASES])
+def test_point_on_the_correctors_own_qwq_is_the_recomputing_point(name, direction, max_deflection, steps,
+                                                                   monkeypatch):
+    """The converged corrector hands the point kernel its ``(Qᵀ(K − H)Q)ᵀ`` (``ws[11]``, the raw
+    equilibrium's last item): it is bit for bit the matrix computed again from the reflectors, ``H(F)``
+    and ``K`` kept with it (``kernel._qwq_t``), and the point kernel gives the same status, stiffness,
+    μ, dμ/ds, force and tangent with it as without it (every number, bit for bit)."""
+    if not pk.compiled():
+        pytest.skip("numba is not importable here")
+    from vjm_pin.solver import kernel
+
+    vm, tr, raws, _ = _corrector_points(name, direction, max_deflection, steps, monkeypatch)
+    fn, ci, cfl, kz, mask = tr._rargs
+    nq, n, m = vm.model.nq, tr.kernel.n, tr.kernel.m
+    given = 0
+    for raw, x_pred in raws:
+        x, kf, j6, wt = raw[0], raw[4], raw[3].jacobian, raw[8]
+        if wt is None:
+            continue
+        given += 1
+        assert wt.shape == (n, n)
+        again = np.empty((n, n))
+        kernel._qwq_t(kf[1], kf[6], kz, m, n, again)
+        assert np.array_equal(wt, again)
+        # and that matrix is (Qᵀ(K − H)Q)ᵀ: Q from the reflectors, applied to the identity
+        q = np.eye(n)
+        for c in range(n):
+            kernel._q_vector(kf[1], q[:, c], m, n, False)
+        assert np.abs(again - (q.T @ (kz - kf[6]) @ q).T).max() <= 1e-12 * np.abs(kz - kf[6]).max()
+        outs = []
+        for w in (wt, curve_mod._NO_WT):
+            out = np.full(nq + 6, np.nan)
+            outs.append((fn(x, x_pred, np.inf, j6, kf[1], kf[6], kf[7], w, ci, cfl, kz, mask, out), out))
+        (a, oa), (b, ob) = outs
+        assert a[0] == b[0] and np.array_equal(np.array(a[1:]), np.array(b[1:]), equal_nan=True)
+        assert np.array_equal(oa, ob, equal_nan=True)
+        assert np.array_equal(wt, again)  # read only: the corrector's buffer is not written by the point
+    assert given >= steps
+
+
+def test_curve_on_the_correctors_own_qwq_is_the_recomputing_curve(monkeypatch):
+    """A whole compiled curve with the point kernel reading the corrector's ``(QᵀWQ)ᵀ`` and with it
+    computing the matrix again (private switch ``curve._reuse_wt``): every point and critical point bit
+    for bit."""
+    if not pk.compiled():
+        pytest.skip("numba is not importable here")
+    monkeypatch.setenv("VJM_PIN_JIT", "1")
+    vm = resolve_model("paper-c-s")
+    on = trace_curve(vm, [-1, 0, 0], 0.004, steps=40, solver=EquilibriumSolver(vm))
+    monkeypatch.setattr(curve_mod, "_reuse_wt", False)
+    off = trace_curve(vm, [-1, 0, 0], 0.004, steps=40, solver=EquilibriumSolver(vm))
+    assert len(on.points) == len(off.points) == 41
+    for p, q in zip(on.points, off.points):
+        assert np.array_equal(p.equilibrium.x, q.equilibrium.x) and np.array_equal(p.wrench, q.wrench)
+        assert (p.stiffness, p.force_control_margin, p.stable) == (q.stiffness, q.force_control_margin, q.stable)
+    assert [(c.force, c.deflection, c.kind) for c in on.critical] == [(c.force, c.deflection, c.kind)
+                                                                      for c in off.critical]
+    assert on.critical
 
 
 @pytest.mark.parametrize("name,direction,md,steps", [("paper-c-s", [-1, 0, 0], 0.004, 40),

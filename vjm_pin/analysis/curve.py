@@ -136,6 +136,11 @@ DIP_DEPTH = 12
 #: :meth:`_Tracer._fused_step`'s answer "the local iteration gave way: go on as the general path".
 _GENERAL = object()
 _new_object = object.__new__
+#: The fused step's point kernel's "no (Qᵀ W Q)ᵀ given: compute it" (a (0, 0) array: one compiled signature).
+_NO_WT = np.zeros((0, 0))
+#: Private switch (False: the fused step's point kernel computes ``(Qᵀ W Q)ᵀ`` itself instead of reading
+#: the converged corrector's: the same bits; for the tests and the benchmark).
+_reuse_wt = True
 
 #: Private switch (False: every point by the generic eq. 30 inverse and the SVD null space of
 #: check_stability_held, as released; for the side-by-side benchmark and the tests).
@@ -846,8 +851,10 @@ class _Tracer:
             else:
                 cfl[-2] = cfl[-1] = math.nan
             try:
+                wt = raw[8]  # the corrector's (Qᵀ W Q)ᵀ at the convergence (None: computed by the kernel)
                 st, k, mu, rate, force = pa[0](raw[0], x_pred, CORRECTOR_RATIO * move + 1e-9, raw[3].jacobian, kf[1],
-                                               kf[6], kf[7], pa[1], pa[2], pa[3], pa[4], out)
+                                               kf[6], kf[7], _NO_WT if wt is None or not _reuse_wt else wt, pa[1], pa[2], pa[3], pa[4],
+                                               out)
             except np.linalg.LinAlgError:  # an exactly singular matrix (numba's np.linalg raises): after the check
                 st = 1
             if not st:

@@ -67,7 +67,7 @@ import numpy as np
 
 from vjm_pin.kinematics.chain import FLUSH_BELOW
 from vjm_pin.solver.chain_kernel import _rate_lin, _rate_terms, _twist_rate_row, _twists
-from vjm_pin.solver.kernel import _back_substitute, _q_vector, _qr_t, _reflect_rows
+from vjm_pin.solver.kernel import _back_substitute, _q_vector, _qr_t, _qwq_t, _reflect_rows
 from vjm_pin.solver.lapack import lapack as _lapack
 from vjm_pin.solver.stability import SCIPY_LAPACK_MAX_N
 from vjm_pin.solver.stiffness import SINGULAR_RCOND, _inverse_if_regular, eq28_matrix
@@ -841,16 +841,15 @@ def _ns_tangent(jac, hh, hz, kz, dt, xd, fd, wt):
     equilibrated LAPACK inverse of :func:`_eq28_tangent`; ``tests/test_point_kernel_speed_paths.py``
     checks it against a reference refined in extended precision."""
     m, n = jac.shape
+    _qwq_t(hh, hz, kz, m, n, wt)  # (Qᵀ W Q)ᵀ: kernel._iterate_body's operations
+    return _ns_tangent_on(jac, hh, hz, kz, dt, xd, fd, wt)
+
+
+def _ns_tangent_on(jac, hh, hz, kz, dt, xd, fd, wt):
+    """:func:`_ns_tangent` on ``wt`` = ``(Qᵀ W Q)ᵀ`` given (read only): the converged corrector's own
+    (:func:`vjm_pin.solver.kernel._qwq_t` on the same reflectors, ``H`` and ``K``: the same bits)."""
+    m, n = jac.shape
     nz = n - m
-    wq = np.empty((n, n))  # Qᵀ W, then (Qᵀ W)ᵀ reflected: (Qᵀ W Q)ᵀ (kernel._iterate_body's operations)
-    for i in range(n):
-        for j in range(n):
-            wq[i, j] = kz[i, j] - hz[i, j]
-    _reflect_rows(hh, wq, m, n)
-    for i in range(n):
-        for j in range(n):
-            wt[i, j] = wq[j, i]
-    _reflect_rows(hh, wt, m, n)
     rmat = _householder_r(hh, m)
     for i in range(m):
         if not (rmat[i, i] != 0.0 and abs(rmat[i, i]) < np.inf):
@@ -1155,11 +1154,13 @@ def _margin_tail(jfree, hh, hz, kz, task, dt, mask, wrench, use_rate, fast_rank,
     return 0, mu, _rate_value(jfree, mask, wrench, task, xd, fd, w, g)
 
 
-def _reuse_point_loops(x, x_pred, limit, j6, hh, hz, f6, ci, cfl, kz, mask, out):
+def _reuse_point_loops(x, x_pred, limit, j6, hh, hz, f6, wtk, ci, cfl, kz, mask, out):
     """The fused step's point (:func:`_fused_point_loops`) on the factorisation of the converged Newton
     iteration itself: the Householder reflectors ``hh`` of ``Jᵀ`` (:func:`vjm_pin.solver.kernel._qr_t`,
     the ``fact[1]`` of the corrector's compiled kernel), ``hz`` = ``H(F)`` and ``f6`` = ``F`` at the same
-    configuration ``x`` whose frame Jacobian is ``j6`` (6, nq). No second QR, no explicit ``Q``; the
+    configuration ``x`` whose frame Jacobian is ``j6`` (6, nq), and ``wtk`` = the iteration's ``(Qᵀ W Q)ᵀ``
+    (n, n; read only: ``ws[11]`` of :func:`vjm_pin.solver.kernel._iterations_into`, the same bits as
+    computed here), or a (0, 0) array: computed here. No second QR, no explicit ``Q``; the
     rank test of ``J`` (:data:`FAST_RANK`) from ``‖R‖_F ‖R⁻¹‖_F ≥ σ_max/σ_min`` where that bound clears
     it, else the singular values of ``R`` as :func:`_point_loops`; the tangent of eq. (29) by
     :func:`_ns_tangent` on the same reflectors (refined: as accurate as :func:`_eq28_tangent`, not
@@ -1200,8 +1201,12 @@ def _reuse_point_loops(x, x_pred, limit, j6, hh, hz, f6, ci, cfl, kz, mask, out)
             jac[r, c] = jfree[task[r], c]
     xd = np.zeros(n)
     fd = np.zeros(m)
-    wt = np.empty((n, n))
-    ok, k = _ns_tangent(jac, hh, hz, kz, dt, xd, fd, wt)
+    if wtk.shape[0] == n and wtk.shape[1] == n:
+        ok, k = _ns_tangent_on(jac, hh, hz, kz, dt, xd, fd, wtk)
+        wt = wtk
+    else:
+        wt = np.empty((n, n))
+        ok, k = _ns_tangent(jac, hh, hz, kz, dt, xd, fd, wt)
     if not ok:
         return 1, nan, nan, nan, force
     nc = cfl.shape[0]  # the predicted bracket of μ, when the caller wrote one (else NaN)
@@ -1229,10 +1234,10 @@ _compiled = None  # the compiled _point_loops once loaded, False when numba is u
 _reuse = None  # the compiled _reuse_point_loops once loaded (compiled())
 #: This module's njit helpers, compiled (before the kernels that call them) by compiled().
 _OWN_HELPERS = ("_sturm_count", "_top_eigpair", "_abs_sums", "_eq28_tangent", "_reduced", "_rate_value", "_householder_r",
-                "_q_both_sides", "_margin_tail", "_lu_factor", "_ns_solve", "_ns_tangent")
+                "_q_both_sides", "_margin_tail", "_lu_factor", "_ns_solve", "_ns_tangent_on", "_ns_tangent")
 #: The dense kernel's helpers (:mod:`vjm_pin.solver.kernel`) this module calls, compiled there once
 #: (numba's on-disk cache of this module does not see edits of kernel.py: clear ``__pycache__`` then).
-_KERNEL_HELPERS = ("_q_vector", "_qr_t", "_reflect_rows")
+_KERNEL_HELPERS = ("_q_vector", "_qr_t", "_reflect_rows", "_qwq_t")
 
 
 def _jit_mode() -> str:

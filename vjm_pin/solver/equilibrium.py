@@ -914,7 +914,9 @@ class EquilibriumSolver:
         of eq. 16 as :class:`~vjm_pin.solver.blocks.LazyBlocks`); a certified stable verdict of eq. (23)
         from ``later``, the fields of :meth:`SpectrumLater.stable_fields`. ``fact`` is the
         ``_fast_fact`` the loop was called with, ``(pt, rt)`` the target as arrays (their bytes key
-        ``_fast_cache``), ``(p_t, r_t)`` as the caller gave it (kept: :meth:`_result` tests identity)."""
+        ``_fast_cache``), ``(p_t, r_t)`` as the caller gave it (kept: :meth:`_result` tests identity).
+        The raw equilibrium's last item is the loop's ``(Qᵀ W Q)ᵀ`` at the convergence (``ws[11]``, kept in
+        the fresh buffers: valid until the context's next call)."""
         code, it, counted, _, ep, er, rs, reused = out
         if counted >= 0:
             self._fast_its = counted
@@ -960,7 +962,7 @@ class EquilibriumSolver:
             kin._blocks_last = (self.vm, wkey, LazyBlocks((jac, hz, plan[12], plan[13], st)))
         except AttributeError:  # a kinematics object with __slots__: no cache
             pass
-        return x, f, it, st, kf, ev, res, stab
+        return x, f, it, st, kf, ev, res, stab, ws[11]
 
     def _fused_iterations(self, ctx, p_t, r_t, x, flushed: bool = False, relaxed: int = 0, eager: bool = False):
         """The fused local iteration of :meth:`_fast_newton_fused` and :meth:`_corrector` from ``x``
@@ -974,8 +976,10 @@ class EquilibriumSolver:
         here); the direct call (:func:`vjm_pin.solver.kernel.lean` with the constants unpacked)
         writes into the buffers, replaced by fresh ones at convergence. Returns None when the plain
         local iteration gives way (``_fast_its`` set where it counts iterations), else
-        ``(x, f, iterations, state, fact, ev, residuals, stability)`` (``fact`` = (J, Q or
-        reflectors, R, F, r, ∇E, H(F), F (6,)) of the kernel). A context with an eighth item True
+        ``(x, f, iterations, state, fact, ev, residuals, stability, wt)`` (``fact`` = (J, Q or
+        reflectors, R, F, r, ∇E, H(F), F (6,)) of the kernel; ``wt`` the converged iteration's
+        ``(Qᵀ(K − H)Q)ᵀ`` from the one-call loop (:meth:`_looped_finish`; valid until this context's next
+        call, for the curve point's tangent), else None). A context with an eighth item True
         (:meth:`_lean_context`; :meth:`_corrector_context` while ``_corrector_defer`` holds) lets the
         direct call certify a stable verdict without the eigenvalues
         (:func:`vjm_pin.solver.kernel._iterate_into`): ``ev`` is then None and the verdict's
@@ -1104,7 +1108,7 @@ class EquilibriumSolver:
                 # the Blocks at this equilibrium (as evaluate_blocks builds them), built when first
                 # asked for (a curve point's stiffness): kept lazily
                 remember_lazy(self.vm, kin, wkey, _blocks_builder(jac, hz, self.nt, self.vm.K_theta, st))
-                return x, f, it, st, kf, ev, res, stab
+                return x, f, it, st, kf, ev, res, stab, None
             self._fast_its = it
             if (it and not relaxed and not kkt < 0.5 * kkt_prev) or it - polish >= (relaxed or self._fast_max_iter):
                 return None
@@ -1207,7 +1211,7 @@ class EquilibriumSolver:
         ``rotation``, ``energy``) computed when first read
         (:class:`~vjm_pin.solver.deferred_result.DeferredResult`: most results of a curve's steps are
         never read), by the same expressions: the same numbers."""
-        x, _, it, st, kf, _, res, stab = raw
+        x, _, it, st, kf, _, res, stab, _ = raw
         src = self.__dict__.get("_deferred_src")
         if src is None or src[0] is not self.vm or src[1] is not self.task:
             vm = self.vm

@@ -313,16 +313,8 @@ def _iterate_body(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, ci
     # Qᵀ W Q, W = K − H: its trailing block is ZᵀWZ, its block [m:, :m] is ZᵀWY. Both sides as
     # left applications of the reflectors (row operations: contiguous, vectorisable loops):
     # A = Qᵀ W, then Qᵀ Aᵀ = (Qᵀ W Q)ᵀ
-    wq = np.empty((n, n))
-    for i in range(n):
-        for j in range(n):
-            wq[i, j] = kz[i, j] - hz[i, j]
-    _reflect_rows(hh, wq, m, n)
     wt = np.empty((n, n))
-    for i in range(n):
-        for j in range(n):
-            wt[i, j] = wq[j, i]
-    _reflect_rows(hh, wt, m, n)
+    _qwq_t(hh, hz, kz, m, n, wt)
     if not converged:
         if follow:  # Cholesky of (red + redᵀ) − 2·shift·I, red = ZᵀWZ
             if not _shifted_cholesky(wt, m, nz, shift, np.empty((nz, nz)), np.empty(nz)):
@@ -358,8 +350,8 @@ def _iterate_body(J6, pos, erot, x, refactor, polish_left, flush, keep, fact, ci
             if not math.isfinite(v):
                 return RANK_FAIL, kkt, ep, er, rs, fact if keep else fact_in, empty, empty, empty
             sym[i, j] = v
-    if lazy:
-        return CONVERGED, kkt, ep, er, rs, fact, empty, empty, sym.ravel()
+    if lazy:  # (the step slot: (Qᵀ W Q)ᵀ at the convergence, row by row, for _iterations_into's ws[11])
+        return CONVERGED, kkt, ep, er, rs, fact, wt.ravel(), empty, sym.ravel()
     ev = np.linalg.eigvalsh(sym)
     return CONVERGED, kkt, ep, er, rs, fact, empty, empty, ev
 
@@ -548,6 +540,23 @@ def _full_rank(rr, m, rank_tol):
     return sv[m - 1] > rank_tol * sv[0]
 
 
+def _qwq_t(hh, hz, kz, m, n, wt):
+    """``wt ← (Qᵀ W Q)ᵀ``, ``W = K − H`` (n, n), from the reflectors ``hh`` of ``Jᵀ``: ``A = Qᵀ W``
+    then ``Qᵀ Aᵀ`` (row operations only: contiguous, vectorisable loops; ``4 m n²`` flops). Its
+    trailing block is ``(ZᵀWZ)ᵀ``, its block ``[:m, m:]`` is ``(ZᵀWY)ᵀ``. The one implementation of the
+    corrector (:func:`_iterate_body`) and of the curve point's tangent
+    (:func:`vjm_pin.analysis.point_kernel._ns_tangent`): on the same ``hh``, ``H``, ``K`` the same bits."""
+    wq = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            wq[i, j] = kz[i, j] - hz[i, j]
+    _reflect_rows(hh, wq, m, n)
+    for i in range(n):
+        for j in range(n):
+            wt[i, j] = wq[j, i]
+    _reflect_rows(hh, wt, m, n)
+
+
 def _reflect_rows(hh, a, m, n):
     """``a ← Qᵀ a = H_{m−1} … H_0 a`` in place for an (n, n) array ``a`` (row operations)."""
     s = np.empty(n)
@@ -732,9 +741,9 @@ def _iterate_into(J6, pos, erot, x, refactor, polish_left, flush, fact, ci, cf, 
                   xout, ws, thr, defer):
     """:func:`_iterate_loops` (``keep`` False) with its arrays written into the caller's buffers
     instead of returned (compiled by :func:`lean`): ``xout`` (nq,) the new iterate (status CONTINUE /
-    POLISH); ``ws`` (:func:`workspace`) = ``(jac, hh, rr, f, r, tau, hz, f6, ev, sym, info)`` shaped as
+    POLISH); ``ws`` (:func:`workspace`) = ``(jac, hh, rr, f, r, tau, hz, f6, ev, sym, info, wt)`` shaped as
     the compiled kernel's factorisation, the eigenvalues of eq. (23), its matrix and ``info`` (2,)
-    (status CONVERGED). Returns ``(status, kkt, ep, er, rs)``: no array crosses back into Python
+    (status CONVERGED; ``wt`` (n, n) is :func:`_iterations_into`'s alone, not written here). Returns ``(status, kkt, ep, er, rs)``: no array crosses back into Python
     (each returned array costs its boxing, ~1 µs).
 
     At convergence the same verdicts as :func:`_iterate_loops`, cheaper where they are clear-cut:
@@ -968,7 +977,8 @@ def _iterations_into(x0, kx, have, kf, kpos, krot, geo, jinfo, rt, rot, flush, c
     (no kinematics, no factorisation), as the solver does.
 
     Writes at convergence the equilibrium into ``xout``, the factorisation, eigenvalues, matrix of
-    eq. (23) and ``info`` into ``ws`` (:func:`_iterate_into`'s layout) and the Jacobian, position
+    eq. (23), ``info`` and the converged iteration's ``(Qᵀ W Q)ᵀ`` (:func:`_qwq_t`, ``ws[11]``: the curve
+    point's tangent reads it instead of computing it again) into ``ws`` (:func:`_iterate_into`'s layout) and the Jacobian, position
     and rotation there into ``kbuf`` = ``(j6, pos, rot)`` (unless reused). Returns ``(code,
     iterations, counted, kkt, ep, er, rs, reused)``: ``code`` :data:`DONE` or :data:`GAVE_WAY`;
     ``counted`` the last iteration the solver records in ``_fast_its`` (−1: none); ``reused``: the
@@ -1021,6 +1031,7 @@ def _iterations_into(x0, kx, have, kf, kpos, krot, geo, jinfo, rt, rot, flush, c
             _copy2(ws[6], kf2[6])
             _copy1(ws[7], kf2[7])
             _copy2(ws[9], sym)
+            _copy2(ws[11], _dx.reshape((n, n)))
             info = ws[10]
             info[1] = cond
             if defer and _certified_stable(sym, nz, thr):
@@ -1137,7 +1148,7 @@ def restorer():
 #: The njit helpers of :func:`_iterate_loops`, compiled (in this order) by :func:`_load_compiled`;
 #: the chain kernel (:mod:`vjm_pin.solver.chain_kernel`) calls the same ones (not ``_iterate_body``).
 _HELPERS = ("_q_vector", "_apply_qt", "_qr_t", "_back_substitute", "_multiplier", "_hessian", "_progress", "_full_rank", "_reflect_rows",
-            "_lu_eliminate", "_shifted_cholesky", "_step_t", "_moved_loops", "_spring_gradient",
+            "_qwq_t", "_lu_eliminate", "_shifted_cholesky", "_step_t", "_moved_loops", "_spring_gradient",
             "_iterate_body")
 _lean = None  # the compiled _iterate_into once built, False when numba is unavailable
 
@@ -1174,7 +1185,7 @@ def workspace(ci, nq: int) -> tuple:
     """Fresh buffers ``(xout, ws)`` of :func:`_iterate_into` for the constants ``ci`` (:func:`pack`)."""
     n, m = int(ci[0]), int(ci[2])
     ws = (np.empty((m, n)), np.empty((m + 1, n)), np.empty((m, m)), np.empty(m), np.empty(n), np.empty(n),
-          np.empty((n, n)), np.empty(6), np.empty(n - m), np.empty((n - m, n - m)), np.zeros(2))
+          np.empty((n, n)), np.empty(6), np.empty(n - m), np.empty((n - m, n - m)), np.zeros(2), np.empty((n, n)))
     return np.empty(nq), ws
 
 
@@ -1186,7 +1197,8 @@ WORKSPACE_BLOCK = 32
 def workspace_after(ws: tuple, certified: bool, pool: list) -> tuple:
     """Fresh buffers ``ws`` of :func:`_iterate_into` after a convergence into ``ws`` (whose arrays
     then belong to the caller's caches), as :func:`workspace` lays them out (C-contiguous, writable,
-    never handed out before): ``info`` (read at once by the caller) and, for a verdict certified
+    never handed out before): ``info`` (read at once by the caller), ``wt`` (read by the curve's point
+    right after the convergence, before the next call: valid until then) and, for a verdict certified
     without the eigenvalues (``certified``), the eigenvalue buffer (not written) are ``ws``'s own;
     the others are views of blocks of :data:`WORKSPACE_BLOCK` buffers kept in ``pool`` (a list
     owned by one caller's context, used by one thread: ``[blocks, next index]``)."""
@@ -1196,7 +1208,7 @@ def workspace_after(ws: tuple, certified: bool, pool: list) -> tuple:
         i = 0
     pool[:] = (blocks, i + 1)
     return (blocks[0][i], blocks[1][i], blocks[2][i], blocks[3][i], blocks[4][i], blocks[5][i], blocks[6][i],
-            blocks[7][i], ws[8] if certified else blocks[9][i], blocks[8][i], ws[10])
+            blocks[7][i], ws[8] if certified else blocks[9][i], blocks[8][i], ws[10], ws[11])
 
 
 def _load_compiled():
