@@ -130,7 +130,7 @@ def add_parser(sub):
     p.set_defaults(func=run)
 
 
-def weakest_direction(k6: np.ndarray, task, lost=()) -> dict | None:
+def weakest_direction(k6: np.ndarray, task, lost=(), rigid=None) -> dict | None:
     """Weakest translational stiffness with the end free in all other task components (free to
     rotate): :func:`vjm_pin.analysis.indices.weakest_translation` on the task block of K_C, as a JSON
     mapping (stiffness N/m, unit direction in world axes, its definition, the free and lost
@@ -139,17 +139,51 @@ def weakest_direction(k6: np.ndarray, task, lost=()) -> dict | None:
     Args:
         k6: (6, 6) K_C (zero rows outside the task) or None. task: task component indices.
         lost: Names of the directions a singular pose loses (:func:`vjm_pin.analysis.indices.lost_directions`).
+        rigid: (r, 6) rigid task directions of a K_C infinite along them (:func:`rigid_stiffness`);
+            ``k6`` is then its finite part (``finite_part``: the other directions alone) and the
+            weakest direction is sought among those (:func:`_stiff_along_rigid`); None when
+            every translation is rigid.
     """
     from vjm_pin.analysis.indices import weakest_translation
 
     t = list(task)
     if k6 is None or not any(c < 3 for c in t):
         return None
-    d = weakest_translation(np.asarray(k6, float)[np.ix_(t, t)], t, lost).to_dict()
+    k = np.asarray(k6, float)[np.ix_(t, t)]
+    if rigid is not None and np.size(rigid):
+        k = _stiff_along_rigid(k, t, rigid)
+        if k is None:
+            return None
+    elif not np.isfinite(k).all():
+        return None
+    d = weakest_translation(k, t, lost).to_dict()
     # the JSON vocabulary: a scalar stiffness along a direction is "stiffness_along"
     d["stiffness_along"] = d.pop("stiffness")
     d["stiffness_along_rotations_held"] = d.pop("stiffness_rotations_held")
     return d
+
+
+#: :func:`_stiff_along_rigid`: the stiffness standing in for an infinite one, × the largest finite
+#: one (its compliance, 1e-6 of the rest, moves the weakest stiffness by at most that fraction;
+#: a larger one would drown the finite part in the rank test of the weakest-direction search).
+RIGID_STAND_IN = 1e6
+
+
+def _stiff_along_rigid(k: np.ndarray, task, rigid) -> np.ndarray | None:
+    """A finite stand-in for a task K_C infinite along the rigid task directions ``rigid`` (r, 6)
+    (:func:`vjm_pin.solver.stiffness.stiffness_rigid`) for the weakest-direction search: its
+    finite part ``k`` (the other directions alone, zero along ``rigid``) plus
+    :data:`RIGID_STAND_IN` × its size along them, so that they never come out weakest. None when
+    every translational task direction is rigid (no weakest translation)."""
+    t = list(task)
+    r = np.asarray(rigid, float).reshape(-1, 6)[:, t]
+    proj = r.T @ r
+    tt = [i for i, c in enumerate(t) if c < 3]
+    if np.abs((np.eye(len(t)) - proj)[tt]).max() <= 1e-9:
+        return None
+    fin = np.where(np.isfinite(k), k, 0.0)
+    big = RIGID_STAND_IN * max(float(np.abs(fin).max()), 1.0)
+    return fin + big * proj
 
 
 def control_dict(vm, held) -> dict:
@@ -201,7 +235,54 @@ def analysis_dict(vm, res, method="eq30") -> dict:
         except SingularStiffness as e:
             out[key] = None
             out[key + "_note"] = str(e)
+    if out["stiffness"] is None:
+        rigid = rigid_stiffness(vm, res, method)
+        if rigid is not None:
+            out["stiffness"] = rigid.stiffness
+            out["stiffness_note"] = rigid_note(vm, rigid)
     return out
+
+
+def rigid_stiffness(vm, res, method="eq30"):
+    """K_C of the equilibrium ``res`` where the end frame cannot move along some task directions
+    (:func:`vjm_pin.solver.stiffness.stiffness_rigid`: finite on the other task directions,
+    ``±inf`` along them), or None: no such direction, or the rest is singular too."""
+    from vjm_pin.exceptions import SingularStiffness
+    from vjm_pin.solver import blocks_at
+    from vjm_pin.solver.stiffness import stiffness_rigid
+
+    try:
+        return stiffness_rigid(blocks_at(vm, res.x, res.wrench), vm.task, method)
+    except SingularStiffness:
+        return None
+
+
+def _task_direction_text(vm, rigid) -> str:
+    """The rigid directions (r, 6) as task-row vectors, as the stiffness diagnosis names them."""
+    t = list(vm.task)
+    return "; ".join(str(np.round(np.asarray(r, float)[t], 3).tolist()) for r in rigid)
+
+
+def rigid_note(vm, kres) -> str:
+    """The one-line note of a K_C infinite along rigid task directions (``kres``: the result of
+    :func:`rigid_stiffness`). Where a rigid direction is not along a task axis, its infinite
+    entries hide the finite stiffness of the other directions: the note then gives it
+    (``finite_part`` on the task rows)."""
+    rigid = kres.rigid
+    t = list(vm.task)
+    many = len(rigid) > 1
+    note = (
+        f"the end frame cannot move along task direction{'s' if many else ''} {_task_direction_text(vm, rigid)} "
+        "to first order (a rigid direction, e.g. a straight chain of rigid links): the stiffness there is "
+        "infinite (inf entries, null in --json)"
+    )
+    axis = all(np.count_nonzero(np.abs(np.asarray(r, float)[t]) > 1e-12) == 1 for r in rigid)
+    if axis:
+        return note + "; the finite entries are K_C along the other task directions"
+    fin = np.asarray(kres.finite_part, float)[np.ix_(t, t)]
+    text = np.array2string(fin, precision=4, separator=", ", max_line_width=10**6).replace("\n", "")
+    rows = " ".join(vm.task_names)
+    return note + f"; on the other task directions alone K_C is {text} (task rows {rows}, zero along the rigid ones)"
 
 
 def load_from_args(args):
@@ -311,7 +392,7 @@ def run(args) -> int:
     loaded at its end only."""
     from vjm_pin.analysis.indices import lost_directions, name_direction
     from vjm_pin.cli.common import finite_vector
-    from vjm_pin.exceptions import InputError
+    from vjm_pin.exceptions import InputError, NoEquilibrium
     from vjm_pin.model.format import COMPONENTS
     from vjm_pin.solver import EquilibriumSolver
 
@@ -327,23 +408,87 @@ def run(args) -> int:
     if vm.closures or loads or gravity is not None:
         out = _run_mechanism(args, vm, loads, gravity)
     elif args.deflection is not None or args.wrench is None:
-        # every task component held (no load at all: the end held at its unloaded location)
+        # every task component held (no load at all: the end held at its unloaded location; where
+        # the end cannot move along some task direction the solver returns the unloaded reference
+        # with zero wrench: EquilibriumSolver._unloaded_reference)
         solver = EquilibriumSolver(vm)
         d = np.zeros(6) if args.deflection is None else finite_vector(args.deflection, "--deflection")
-        res = solver.verify(solver.solve(d), method=method)
+        try:
+            eq = solver.solve(d)
+        except NoEquilibrium as e:
+            _raise_if_out_of_reach(vm, solver, d, e)
+            raise
+        res = solver.verify(eq, method=method)
         out = analysis_dict(vm, res, method)
     else:  # every task component loaded: Newton on the total potential
         solver = EquilibriumSolver(vm)
         res = solver.verify(solver.solve_wrench(finite_vector(args.wrench, "--wrench")), method=method)
         out = analysis_dict(vm, res, method)
+    k6, rigid = out["stiffness"], None
+    if k6 is not None and not np.isfinite(k6).all():  # infinite along a rigid direction (serial paths)
+        kres = rigid_stiffness(vm, res, method)
+        k6, rigid = kres.finite_part, kres.rigid
     # a robot's default task drops the directions its pose cannot move (robots.default_task)
     lost = [name_direction(v, COMPONENTS) for v in lost_directions(vm)] if robot is not None else []
-    out["weakest"] = weakest_direction(out["stiffness"], vm.task, lost)
+    out["weakest"] = weakest_direction(k6, vm.task, lost, rigid)
     if robot is not None:
         out["pose"] = robot.pose
         out["pose_name"] = robot.pose_name
     out["loads"] = loads_list(args, loads)
     return _emit(args, vm, robot, out)
+
+
+def _raise_if_out_of_reach(vm, solver, d, err) -> None:
+    """After ``solver.solve(d)`` found no equilibrium (``err``): the same failure (a
+    :class:`NoEquilibrium`: exit status 3, the contract for "no equilibrium: a deflection the
+    chain cannot reach") with a message that says why, when ``d`` lies beyond the second-order
+    reach of the end frame along a task direction it cannot move along to first order at the
+    unloaded configuration (:func:`vjm_pin.solver.checks.rigid_reach`: a straight chain of rigid
+    links cannot be stretched, nor moved sideways with its length held); else nothing (the
+    caller re-raises ``err``)."""
+    from vjm_pin.exceptions import NoEquilibrium
+    from vjm_pin.solver import blocks_at
+    from vjm_pin.solver.checks import rigid_reach
+    from vjm_pin.solver.stiffness import rigid_directions
+
+    t = list(vm.task)
+    d6 = np.asarray(d, float).ravel()
+    if d6.size == 3:
+        d6 = np.concatenate([d6, np.zeros(3)])
+    elif d6.size == len(t) and d6.size != 6:
+        full = np.zeros(6)
+        full[t] = d6
+        d6 = full
+    if d6.size != 6:
+        return
+    x = np.asarray(vm.reference, float)
+    b = blocks_at(vm, x, np.zeros(6), solver.kin)
+    rig = rigid_directions(b)
+    if not rig.size:
+        return
+
+    def hessian(rho):  # the Hessian of ρᵀt over (θ, q): eq. (16) contracted with the task wrench ρ
+        w = np.zeros(6)
+        w[t] = rho
+        h = blocks_at(vm, x, w, solver.kin)
+        return np.block([[h.H_tt, h.H_tq], [h.H_qt, h.H_qq]])
+
+    found = rigid_reach(np.hstack([b.J_theta, b.J_q]), rig, hessian, d6[t])
+    if found is None:
+        return
+    rho, asked, reach = found
+    if abs(reach) <= 1e-12 * max(float(np.abs(d6).max()), 1e-300):
+        reach = 0.0  # (rounding of a zero reach)
+    unit = "m" if all(c < 3 for c, v in zip(t, rho) if abs(v) > 1e-12) else "m or rad"
+    raise NoEquilibrium(
+        f"no equilibrium for --deflection {(np.round(d6, 9) + 0.0).tolist()}: it is out of reach. At the "
+        f"unloaded configuration the end frame cannot move along task direction {(np.round(rho, 3) + 0.0).tolist()} "
+        "to first order (a rigid direction, e.g. a straight chain of rigid links, which cannot be stretched), and "
+        f"to second order it reaches at most {reach + 0.0:.3g} {unit} along it with the other components as "
+        f"asked, not {asked:.3g}",
+        err.result,
+        err.residual,
+    ) from None
 
 
 def _run_mechanism(args, vm, loads, gravity) -> dict:
@@ -513,6 +658,8 @@ def _human(vm, robot, out, fmt_matrix) -> str:
         else:
             lines.append(f"{label} (N/m, N/rad, N·m/m, N·m/rad; world axes at the end frame):")
             lines.append(fmt_matrix(out[key]))
+            if out.get(key + "_note"):  # a K_C infinite along a rigid direction (rigid_note)
+                lines.append(f"{label}: {out[key + '_note']}")
     wk = out.get("weakest")
     if wk is not None:
         lines.append(

@@ -37,6 +37,7 @@ if TYPE_CHECKING:
         stiffness_eq32,
         stiffness_eq33,
         stiffness_from_blocks,
+        stiffness_rigid,
     )
 
 #: Public name → the submodule defining it. Imported on first use (PEP 562 ``__getattr__``): a
@@ -63,6 +64,7 @@ _LAZY = {
     "stiffness_eq32": "stiffness",
     "stiffness_eq33": "stiffness",
     "stiffness_from_blocks": "stiffness",
+    "stiffness_rigid": "stiffness",
 }
 
 
@@ -142,5 +144,6 @@ __all__ = [
     "stiffness_eq32",
     "stiffness_eq33",
     "stiffness_from_blocks",
+    "stiffness_rigid",
     "unloaded_stiffness",
 ]

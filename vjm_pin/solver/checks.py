@@ -8,7 +8,10 @@ once:
 - :func:`statics_relative`: the eq. (5) residual per row against its own scale;
 - :func:`verdict_agrees`: a stability verdict against a recomputed one;
 - :func:`softest_direction` and :func:`stiffness_fd_error`: ``K_C`` along its softest task
-  direction against central differences of the task wrench of re-solved equilibria.
+  direction against central differences of the task wrench of re-solved equilibria;
+- :func:`rigid_reach`: whether a prescribed deflection lies beyond what the end frame can reach
+  along a rigid task direction (one it cannot move along to first order: a straight chain of
+  rigid links cannot be stretched), to second order.
 
 Pure functions on numpy arrays; the re-solve is the caller's (a callback).
 """
@@ -111,8 +114,77 @@ def stiffness_fd_error(
     return best
 
 
+#: :func:`rigid_reach`: a deflection is beyond the second-order reach along a rigid direction when
+#: it asks for more than the reach plus this fraction of the reach's size (and of the deflection's).
+REACH_MARGIN = 0.1
+
+
+def rigid_reach(
+    jacobian: np.ndarray,
+    rigid: np.ndarray,
+    hessian: Callable[[np.ndarray], np.ndarray],
+    d: np.ndarray,
+) -> tuple[np.ndarray, float, float] | None:
+    """A rigid task direction along which the deflection ``d`` is out of reach, to second order.
+
+    At a configuration where the end frame cannot move along the unit task direction ``ρ`` to
+    first order (``ρᵀJ = 0``: a row of ``rigid``), a motion ``δx`` moves it along ``ρ`` by
+    ``½ δxᵀ H_ρ δx`` (``H_ρ`` the Hessian of ``ρᵀt``, eq. 16 contracted with ``ρ``). With the
+    other task components at their requested values (``J δx₀ = (I − RRᵀ) d``, ``δx₀`` the
+    minimum-norm solution) and ``H_ρ`` negative definite on the null space ``N`` of ``J``, the
+    largest reachable component is ``a = max_z ½ (δx₀ + N z)ᵀ H_ρ (δx₀ + N z)`` (a Schur
+    complement; 0 for ``δx₀ = 0``: a straight chain cannot be stretched at all). ``d`` is out of
+    reach along ``ρ`` when ``ρᵀd > a + REACH_MARGIN·|a|`` (and by more than rounding), i.e. it asks
+    for more than the reach by a margin; both signs of ``ρ`` are tried. A second-order (local) test: the caller
+    uses it to explain why no equilibrium was found, not to refuse a deflection up front.
+
+    Args:
+        jacobian: (m, n) task rows of ``[J_θ J_q]`` at the configuration.
+        rigid: (r, m) orthonormal rigid task directions (``vjm_pin.solver.stiffness.rigid_directions``).
+        hessian: ``hessian(ρ)`` → (n, n) Hessian of ``ρᵀt`` over the same columns (eq. 16 with
+            the task wrench ``ρ``).
+        d: (m,) the requested deflection on the task rows (m, rad).
+
+    Returns:
+        ``(ρ, asked, reach)``: the direction (signed so that the reach is a maximum), the component
+        asked ``ρᵀd`` and the reach ``a``; None when ``d`` is within reach along every rigid
+        direction (or the second order decides nothing: ``H_ρ`` not definite on ``N``).
+    """
+    j = np.asarray(jacobian, float)
+    d = np.asarray(d, float)
+    rig = np.asarray(rigid, float).reshape(-1, j.shape[0])
+    if not rig.size:
+        return None
+    m, n = j.shape
+    proj = np.eye(m) - rig.T @ rig
+    dx0 = np.linalg.lstsq(j, proj @ d, rcond=None)[0] if j.size else np.zeros(n)
+    _, sv, vt = np.linalg.svd(j) if j.size else (None, np.zeros(0), np.eye(n))
+    rank = int(np.sum(sv > 1e-10 * max(sv.max() if sv.size else 0.0, 1e-300)))
+    null = vt[rank:].T
+    for rho in rig:
+        h = np.asarray(hessian(rho), float)
+        h = 0.5 * (h + h.T)
+        for sgn in (1.0, -1.0):
+            hs = sgn * h
+            hn = null.T @ hs @ null
+            if hn.size:
+                ev = np.linalg.eigvalsh(hn)
+                if not ev.max() < -1e-12 * max(np.abs(ev).max(), 1e-300):
+                    continue  # not a maximum along ρ: the second order decides nothing
+                g = null.T @ hs @ dx0
+                reach = 0.5 * float(dx0 @ hs @ dx0 - g @ np.linalg.solve(hn, g))
+            else:
+                reach = 0.5 * float(dx0 @ hs @ dx0)
+            asked = float(sgn * rho @ d)
+            if asked > reach + REACH_MARGIN * abs(reach) and asked - reach > 1e-12 * max(np.abs(d).max(), 1e-300):
+                return sgn * rho, asked, reach
+    return None
+
+
 __all__ = [
     "FD_STEPS",
+    "REACH_MARGIN",
+    "rigid_reach",
     "softest_direction",
     "statics_relative",
     "stiffness_fd_error",

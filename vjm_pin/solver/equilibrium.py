@@ -1872,7 +1872,16 @@ class EquilibriumSolver:
             fast_fail: One Newton attempt from ``x0``, without continuation, escapes or
                 perturbed restarts: for trial points of a line search, where a failure only
                 shortens the step and the full recovery is wasted.
+
+        A zero ``deflection`` from the default start where the end frame cannot move along some
+        task direction (a straight chain of rigid links, Model A S: every force along it
+        balances there) gives the unloaded reference with zero wrench, the minimum-norm one
+        (path ``"reference"``, 0 iterations; :meth:`_unloaded_reference`).
         """
+        if x0 is None and wrench0 is None and target is None:
+            ref = self._unloaded_reference(deflection)
+            if ref is not None:
+                return ref
         if target is None and x0 is not None and len(self.free) <= SCIPY_LAPACK_MAX_N:
             # a warm start (curve tracing) of a small model: the lean path when it applies, without
             # the BLAS thread limit (OpenBLAS runs one thread at these orders anyway; its fallback
@@ -1881,6 +1890,32 @@ class EquilibriumSolver:
             if res is not None:
                 return res
         return self._solve_limited(deflection, target, x0, wrench0, raise_on_failure, fast_fail)
+
+    def _unloaded_reference(self, deflection) -> EquilibriumResult | None:
+        """The unloaded reference as the equilibrium of a zero ``deflection`` where the end frame
+        cannot move along some task direction there (``J`` rank deficient at the start: the test
+        that would perturb it, :meth:`_start_regular`). Every wrench along such a direction
+        balances at the reference (``Jᵀw = 0``), so the held problem leaves it indeterminate; the
+        minimum-norm one, zero, is the unloaded state (as the curve tracer starts:
+        :func:`vjm_pin.analysis.curve._unloaded`), where a perturbed start would pick an arbitrary
+        force and a bend. Returned with its eq. (23) verdict (path ``"reference"``, 0 iterations),
+        or None: a non-zero or malformed deflection (the usual path answers), a spring preloaded at
+        the reference (not an equilibrium without load), or a regular start (the iteration
+        returns the reference itself)."""
+        try:
+            d = np.asarray(deflection, dtype=float)
+        except (TypeError, ValueError):
+            return None
+        if d.ndim != 1 or d.size not in (3, 6, len(self.task)) or not (_all_finite(d) and not d.any()):
+            return None
+        vm = self.vm
+        x = vm.reference.copy()
+        if vm.K_theta.size and np.any(vm.K_theta @ (x[vm.theta_idx] - vm.theta0)):
+            return None
+        if self._start_regular(x):
+            return None
+        state = self.kin.evaluate(x, hessian=False)
+        return self._result(x, np.zeros(len(self.task)), 0, True, state, self.p0, self.r0, "reference")
 
     @one_blas_thread
     def _solve_limited(self, deflection, target, x0, wrench0, raise_on_failure, fast_fail) -> EquilibriumResult:
@@ -2134,9 +2169,13 @@ class EquilibriumSolver:
                 best = r2
         best = done(best)
         if not best.converged and raise_on_failure:
+            # the requested deflection (the target against the unloaded end), then where the last
+            # iterate ended (not an equilibrium)
+            asked = np.concatenate([np.asarray(p_t, float) - self.p0, pin.log3(np.asarray(r_t, float) @ self.r0.T)])
             raise NoEquilibrium(
-                f"no equilibrium found for deflection {np.round(best.deflection, 9).tolist()} after "
-                f"{total} iterations and {self.restarts} restarts (residuals {best.residuals})",
+                f"no equilibrium found for deflection {(np.round(asked, 9) + 0.0).tolist()} after "
+                f"{total} iterations and {self.restarts} restarts (the last iterate ended at deflection "
+                f"{np.round(best.deflection, 9).tolist()}; residuals {best.residuals})",
                 best,
                 best.residual(),
             )

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -29,6 +29,12 @@ class StiffnessResult:
         dtheta_dt: (nθ, 6) K_θ: spring-coordinate sensitivity.
         method: ``"eq30"``, ``"eq32"`` or ``"eq33"``.
         task: Constrained task component indices.
+        rigid: (r, 6) orthonormal task directions (zero off the task) along which the end frame
+            cannot move to first order (:func:`stiffness_rigid`): K_C is infinite along them
+            (``±inf`` entries); empty (0, 6) for a regular K_C.
+        finite_part: With ``rigid``: (6, 6) ``V K' Vᵀ``, the stiffness on the other task
+            directions ``V`` alone (zero along ``rigid``; where a rigid direction is not along a
+            task axis its infinite entries hide these numbers in ``stiffness``); else None.
     """
 
     stiffness: np.ndarray
@@ -36,11 +42,19 @@ class StiffnessResult:
     dtheta_dt: np.ndarray
     method: str
     task: tuple[int, ...]
+    rigid: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
+    finite_part: np.ndarray | None = None
 
     def is_symmetric(self, rtol: float = 1e-8) -> bool:
         """Symmetric to ``rtol`` (relative to the largest entry). Loaded by a pure force the
-        stiffness is symmetric; a moment (dead load) may make it non-symmetric."""
+        stiffness is symmetric; a moment (dead load) may make it non-symmetric. Infinite
+        entries (:attr:`rigid`) are compared by value."""
         k = self.stiffness
+        if self.rigid.size:  # ±inf entries: symmetric where they match, the finite rest by value
+            inf = ~np.isfinite(k)
+            if np.any(inf != inf.T) or np.any(k[inf] != k.T[inf]):
+                return False
+            k = np.where(inf, 0.0, k)
         return bool(np.abs(k - k.T).max() <= rtol * max(np.abs(k).max(), 1e-300))
 
     @property
@@ -293,6 +307,87 @@ def stiffness_from_blocks(b: Blocks, task=(0, 1, 2, 3, 4, 5), method: str = "eq3
     if method == "eq33":
         return stiffness_eq33(b, task)
     raise ValueError(f"unknown stiffness method '{method}'; choose one of {METHODS}")
+
+
+# --------------------------------------------------------------------------- rigid task directions
+#: Entries of the projector ``R Rᵀ`` on the rigid task directions above this are infinite in
+#: :func:`stiffness_rigid` (the projector's entries are O(1); rounding leaves ~1e-16).
+RIGID_ENTRY_TOL = 1e-12
+
+
+def _rigid_split(b: Blocks) -> tuple[np.ndarray, np.ndarray]:
+    """``(V, R)``: orthonormal columns (task rows of ``b``) spanning the task directions the end
+    frame can move along to first order (the range of ``[J_θ J_q]``) and the rest (its left
+    null space: rigid directions), split at the rank test of :func:`_diagnose`."""
+    m = b.J_theta.shape[0]
+    jall = np.hstack([b.J_theta, b.J_q])
+    if not jall.size:
+        return np.zeros((m, 0)), np.eye(m)
+    u, s, _ = np.linalg.svd(jall)
+    rank = int(np.sum(s > RANK_TOL * max(s.max() if s.size else 0.0, 1e-300)))
+    return u[:, :rank], u[:, rank:]
+
+
+def rigid_directions(b: Blocks) -> np.ndarray:
+    """(r, m) orthonormal rows: the task directions (the task rows of ``b``; m along translations,
+    rad along rotations) along which the end frame cannot move to first order, e.g. along a
+    straight chain of rigid links: the left null space of ``[J_θ J_q]`` (singular values at most
+    ``RANK_TOL`` × the largest, the test of the "rigid direction" diagnosis of
+    :class:`SingularStiffness`). (0, m) when the end can move in every task direction."""
+    return _rigid_split(b)[1].T.copy()
+
+
+def stiffness_rigid(b: Blocks, task=(0, 1, 2, 3, 4, 5), method: str = "eq30") -> StiffnessResult:
+    """K_C, K_q, K_θ where the end frame cannot move along some task directions ``R``
+    (:func:`rigid_directions`; e.g. a straight chain of rigid links, Model A S): the matrix of
+    eq. (28) is singular there, and the stiffness along ``R`` is infinite.
+
+    ``method`` (eq. 30, 32 or 33) is applied to the task rows ``Vᵀ J`` that the end can move
+    along (``V`` orthonormal, ``VᵀR = 0``), giving ``K'`` on those directions; then
+    ``K_C = V K' Vᵀ`` with the entries where the projector ``R Rᵀ`` is non-zero set to
+    ``±inf`` (its sign): the limit of a stiffness that grows without bound along ``R``. For an
+    ``R`` along a task axis (the straight column: ``x``) that is one infinite diagonal entry
+    and the finite stiffness of the other directions. ``K_q = K_q' Vᵀ`` and ``K_θ = K_θ' Vᵀ``
+    (a displacement along ``R`` cannot be imposed: its component is ignored). The result's
+    ``rigid`` holds ``R`` (6-vectors) and ``finite_part`` ``V K' Vᵀ`` (6, 6).
+
+    Raises:
+        SingularStiffness: no rigid direction (the matrix is singular for another reason, or not
+            at all: use :func:`stiffness_from_blocks`), or the stiffness on the other directions
+            is singular too (then that reason).
+    """
+    v, r = _rigid_split(b)
+    m = b.J_theta.shape[0]
+    if r.shape[1] == 0:
+        raise SingularStiffness(
+            "the end frame can move along every task direction to first order: no rigid direction", np.zeros(0)
+        )
+    k = v.shape[1]
+    nt, nq = b.J_theta.shape[1], b.J_q.shape[1]
+    if k:
+        sub = Blocks(
+            J_theta=v.T @ b.J_theta,
+            J_q=v.T @ b.J_q,
+            H_tt=b.H_tt,
+            H_tq=b.H_tq,
+            H_qt=b.H_qt,
+            H_qq=b.H_qq,
+            K_theta=b.K_theta,
+            state=b.state,
+        )
+        part = stiffness_from_blocks(sub, tuple(range(k)), method)
+        kc = v @ part.stiffness[:k, :k] @ v.T
+        kq = part.dq_dt[:, :k] @ v.T
+        kt = part.dtheta_dt[:, :k] @ v.T
+    else:
+        kc, kq, kt = np.zeros((m, m)), np.zeros((nq, m)), np.zeros((nt, m))
+    proj = r @ r.T
+    big = np.abs(proj) > RIGID_ENTRY_TOL
+    finite = _embed(task, kc, kq, kt, method).stiffness
+    out = _embed(task, np.where(big, np.copysign(np.inf, proj), kc), kq, kt, method)
+    rig = np.zeros((r.shape[1], 6))
+    rig[:, list(task)] = r.T
+    return replace(out, rigid=rig, finite_part=finite)
 
 
 # --------------------------------------------------------------------------- mechanisms with loop closures
