@@ -87,7 +87,8 @@ def test_fused_corrector_keeps_the_curve(jit, name, direction, md, steps):
 
 
 def _counting(monkeypatch):
-    """Counts of the corrector's calls and of its converged answers."""
+    """Counts of the corrector's calls and of its converged answers (``_corrector``, and the merged
+    step's ``_corrector_step`` where its corrector ran)."""
     calls = {"corrector": 0, "converged": 0}
     original = EquilibriumSolver._corrector
 
@@ -97,7 +98,17 @@ def _counting(monkeypatch):
         calls["converged"] += out is not None
         return out
 
+    merged = EquilibriumSolver._corrector_step
+
+    def counted_merged(self, *args, **kwargs):  # (the merged step's corrector: `(out, raw)`, raw None unless converged)
+        out = merged(self, *args, **kwargs)
+        if out is not None and out[0][0] != 0:  # (phase 0: rejected before the corrector ran)
+            calls["corrector"] += 1
+            calls["converged"] += out[1] is not None
+        return out
+
     monkeypatch.setattr(EquilibriumSolver, "_corrector", counted)
+    monkeypatch.setattr(EquilibriumSolver, "_corrector_step", counted_merged)
     return calls
 
 

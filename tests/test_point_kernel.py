@@ -317,6 +317,9 @@ def _corrector_points(name, direction, max_deflection, steps, monkeypatch):
         return raw
 
     monkeypatch.setattr(Solver, "_corrector", corrector)
+    # the three calls with Python between them (the merged step, bit for bit the same, does not go
+    # through _corrector: tests/test_merged_step.py)
+    monkeypatch.setattr(curve_mod, "_merged", False)
     vm = resolve_model(name)
     solver = EquilibriumSolver(vm)
     c = trace_curve(vm, direction, max_deflection, steps=steps, solver=solver)
@@ -535,6 +538,7 @@ def test_curve_on_the_correctors_qr_is_the_recomputing_curve(name, direction, md
         return original(*args)
 
     monkeypatch.setattr(pk, "_reuse", counted)
+    monkeypatch.setattr(curve_mod, "_merged", False)  # (the merged step calls the compiled one inside)
     on = trace_curve(vm, direction, md, steps=steps, solver=EquilibriumSolver(vm))
     assert calls["n"] >= steps
     monkeypatch.setattr(curve_mod, "_reuse_qr", False)

@@ -135,12 +135,17 @@ MIN_STEP = 1e-10
 DIP_DEPTH = 12
 #: :meth:`_Tracer._fused_step`'s answer "the local iteration gave way: go on as the general path".
 _GENERAL = object()
+#: :meth:`_Tracer._merged_step`'s answer "not merged: the step as before".
+_UNMERGED = object()
 _new_object = object.__new__
 #: The fused step's point kernel's "no (Qᵀ W Q)ᵀ given: compute it" (a (0, 0) array: one compiled signature).
 _NO_WT = np.zeros((0, 0))
 #: Private switch (False: the fused step's point kernel computes ``(Qᵀ W Q)ᵀ`` itself instead of reading
 #: the converged corrector's: the same bits; for the tests and the benchmark).
 _reuse_wt = True
+#: Private switch (False: a curve's common sub-step as three compiled calls with Python between them
+#: instead of one, :meth:`_Tracer._merged_step`; the same numbers bit for bit; for the tests and the benchmark).
+_merged = True
 
 #: Private switch (False: every point by the generic eq. 30 inverse and the SVD null space of
 #: check_stability_held, as released; for the side-by-side benchmark and the tests).
@@ -541,6 +546,8 @@ class _Tracer:
     second_order = False
     #: The fused step's compiled helpers (set per instance by :meth:`_point_fn`).
     _fz = None
+    #: The merged step's compiled call and target constants (set per instance by :meth:`_merged_step`).
+    _ms = _p0d = None
 
     def __init__(self, vm, d, max_deflection, solver: EquilibriumSolver, refine_tol):
         self.vm, self.d, self.solver = vm, d, solver
@@ -578,6 +585,8 @@ class _Tracer:
         self._rt = None  # (rotation part of the last target or None for a translation, its target rotation, both
         # target arrays float64 and C-contiguous) (_fused_step)
         self._p0l = None  # (p0, p0's and d[:3]'s entries as floats) (_fused_step)
+        self._p0d = None  # (p0, [p0, d[:3]] as a float64 array) (_merged_step)
+        self._ms = None  # the merged step's compiled call (_merged_step; None: not decided yet, False: not used)
         self._hz_shape = (self.kernel.n, self.kernel.n) if self.kernel is not None else None  # H(F)'s shape, (n, n)
         self._d_lin, self._d_rot = d[:3].copy(), d[3:].copy()  # (s·d[:3] is (s·d)[:3], element by element)
         self._d_translation = not self._d_rot.any()
@@ -698,6 +707,7 @@ class _Tracer:
         if t is False:
             t = self.tangent(a)
         ds = s - a.s
+        gave = False  # the merged step's corrector gave way (the general path goes on from its prediction)
         if t is not None:
             dw = None  # ds·t[1] (+ the second-order term), when the general solve needs it
             h = a.hist if second_order else None
@@ -710,7 +720,16 @@ class _Tracer:
                     c = 0.5 * ds * ds / back
             fz = self._fz
             fresh = fz is not None
-            if fresh:  # x_pred and its scaled move in one compiled call (x_pred: a fresh float64 (nq,) array)
+            if fresh and self._ms is not False:
+                got = self._merged_step(a, s, t, h, c, ds)
+                if got is not _UNMERGED:
+                    if type(got) is not tuple:
+                        return got
+                    x_pred, move = got
+                    gave = True
+            if gave:
+                pass
+            elif fresh:  # x_pred and its scaled move in one compiled call (x_pred: a fresh float64 (nq,) array)
                 x_pred = np.empty(self._nq)
                 if c is None:
                     move = fz[0](a.eq.x, t[0], ds, self.free, self.var_scale, _chain._flush_enabled, x_pred)
@@ -730,7 +749,10 @@ class _Tracer:
         else:
             x_pred, w_pred = a.eq.x.copy(), a.eq.wrench.copy()
             move = 0.0
-        if t is not None and self._corr is not None:
+        if gave:
+            eq = None  # the merged step's local iteration gave way: as _solve_local returning None
+            target = s * self.d
+        elif t is not None and self._corr is not None:
             got = self._fused_step(a, s, x_pred, move, t, fresh)
             if got is not _GENERAL:
                 return got
@@ -763,6 +785,78 @@ class _Tracer:
             return None
         p = self.point(eq, s)
         if t is not None:
+            p.hist = (a.s, t[0], t[1])
+        return p
+
+    def _merged_step(self, a: _BP, s: float, t, h, c, ds: float):
+        """:meth:`step`'s common case (the compiled prediction, :meth:`_fused_step` on the corrector's own
+        QR) in one compiled call (:func:`~vjm_pin.analysis.point_kernel._step_loops` through
+        ``EquilibriumSolver._corrector_step``): the same calls on the same arrays, so the same point bit
+        for bit. Returns the point or None (rejected: the move, the continuity check) as :meth:`step`,
+        ``(x_pred, move)`` when the corrector gave way (the general path goes on from that prediction), or
+        :data:`_UNMERGED` where the merged call does not apply (yet): the steps before the fused step set
+        its pieces up, a direction with a rotation, ``_merged`` off, or a ``LinAlgError`` of the point
+        kernel (the unmerged step then runs the same calls again and declines that point)."""
+        ms = self._ms
+        if ms is None:
+            if self._reuse is not True or self._rt is None:
+                return _UNMERGED  # (decided once the fused step has run)
+            ws = self._corr[6][1] if len(self._corr) > 6 and self._corr[6] is not None else None
+            ok = (_merged and self._d_translation and ws is not None and len(ws) > 11
+                  and ws[1].shape == self._hh_shape and ws[6].shape == self._hz_shape)
+            ms = self._ms = (_pk.step() if ok else None) or False
+            if not ms:
+                return _UNMERGED
+        rt = self._rt
+        if rt[0] is not None or not rt[2]:
+            return _UNMERGED
+        solver = self.cont
+        pl = self._p0d
+        if pl is None or pl[0] is not solver.p0:
+            pl = self._p0d = (solver.p0, np.array(solver.p0.tolist() + self._d_lin.tolist()))
+        pa = self._rargs
+        nq = self._nq
+        x_pred = np.empty(nq)
+        pt = np.empty(3)
+        out = np.empty(nq + 6)
+        mu0, rate0 = a.mu, a.dmu
+        hint = _mu_hint and rate0 is not None and rate0 == rate0 and mu0 == mu0
+        second = c is not None
+        pre = (a.eq.x, t[0], h[1] if second else t[0], ds, c if second else 0.0, second, MAX_MOVE, pl[1], s,
+               x_pred, pt)
+        post = (CORRECTOR_RATIO, hint, mu0 if hint else 0.0, rate0 if hint else 0.0, pa[1], pa[2], pa[3], pa[4], out)
+        try:
+            got = solver._corrector_step(self._corr, ms, pre, post, pt, rt[1])
+        except np.linalg.LinAlgError:  # (numba's np.linalg raises on an exactly singular matrix)
+            return _UNMERGED
+        if got is None:
+            return _UNMERGED
+        res, raw = got
+        if res[0] == 0:  # the predicted move is too large: no solve
+            return None
+        if raw is None:  # the local iteration gave way
+            return x_pred, res[9]
+        st = res[10]
+        if st < 0:  # the corrector strayed
+            return None
+        self._npts += 1
+        eq = solver._corrector_result(raw, pt, rt[1])
+        if st:  # the point kernel declines: the generic path (Blocks kept by the corrector)
+            p = self.point(eq, s)
+        else:
+            k, mu, rate, force = res[11], res[12], res[13], res[14]
+            tan = (out[:nq], out[nq:])
+            ev = raw[5]
+            if ev is None:  # "stable" certified, the eigenvalues when first read (_LateBP)
+                p = _LateBP.with_tangent(s, eq, force, k, mu, raw[7],
+                                         rate if self.mask is not None and _analytic_rate else None, tan)
+            else:
+                lam = float(ev[-1]) if ev.size else -np.inf  # (ascending: _max_eig)
+                p = _BP(s, eq, force, k, None, mu, lam)
+                if self.mask is not None and _analytic_rate:
+                    p.dmu = rate
+                p.tan = tan
+        if self.second_order:
             p.hist = (a.s, t[0], t[1])
         return p
 

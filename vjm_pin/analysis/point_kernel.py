@@ -1224,6 +1224,64 @@ def _reuse_point_loops(x, x_pred, limit, j6, hh, hz, f6, wtk, ci, cfl, kz, mask,
     return 0, k, mu, rate, force
 
 
+def _step_loops(ax, xd, hx, ds, c, second, max_move, p0d, s, xp, pt, kx, have, kf, kpos, krot, kj6, geo, jinfo,
+                rt, rot, flush, ci, cf, kz, mask, theta0, vscale, escale, xout, ws, kbuf, thr, defer, lim, ratio,
+                hint, mu0, rate0, pci, pcfl, pkz, pmask, out):
+    """A curve's common sub-step (:meth:`~vjm_pin.analysis.curve._Tracer.step` through
+    :meth:`~vjm_pin.analysis.curve._Tracer._fused_step`) in one compiled call: the same three compiled
+    calls in the same order on the same arrays, so the same numbers bit for bit, without the Python
+    between them (two calls' argument unboxing, the corrector's per-call checks).
+
+    1. The prediction :func:`_predict_loops` (``second``: :func:`_predict2_loops` with ``hx``, ``c``) from
+       ``ax`` along ``xd`` over ``ds`` into ``xp``, its scaled move (the free coordinates and scales of
+       ``pci``/``pcfl``: the tracer's). Beyond ``max_move`` the sub-step is rejected before the corrector.
+    2. The target position ``p₀ + s·d[:3]`` (``p0d`` = ``[p₀, d[:3]]``, element by element as the tracer's
+       Python floats) into ``pt`` and the constants' target slots (``cf[9:12]``, as
+       :func:`vjm_pin.solver.kernel.with_target`); the rotation ``rt`` is the kept one (a translation ``d``).
+    3. The corrector :func:`vjm_pin.solver.kernel._iterations_into` from ``xp`` (its arguments ``kx`` …
+       ``lim`` as :meth:`~vjm_pin.solver.equilibrium.EquilibriumSolver._corrector_looped` passes them;
+       ``kj6``: the kept state's frame Jacobian, read where the loop reuses it).
+    4. At its convergence the point :func:`_reuse_point_loops` on the converged iteration's buffers
+       (``ws``: reflectors, ``H(F)``, ``F``, ``(QᵀWQ)ᵀ``; the frame Jacobian ``kbuf[0]``, or ``kj6`` when
+       reused) with the continuity limit ``ratio·move + 1e-9`` and μ's bracket predicted from ``mu0``,
+       ``rate0`` (``hint``; NaN otherwise) written into ``pcfl``'s last two slots, as the tracer writes it.
+
+    Returns ``(phase, code, iterations, counted, kkt, ep, er, rs, reused, move, status, k, μ, dμ/ds,
+    dᵀF)``: ``phase`` 0 rejected by the move (nothing else done), 1 the corrector gave way (``code``),
+    2 converged (``status`` and the rest: :func:`_reuse_point_loops`'s)."""
+    nan = np.nan
+    n, m = pci[0], pci[2]
+    free = pci[4:4 + n]
+    vsc = pcfl[8 + m:8 + m + n]
+    if second:
+        move = _predict2_jit(ax, xd, hx, ds, c, free, vsc, flush, xp)
+    else:
+        move = _predict_jit(ax, xd, ds, free, vsc, flush, xp)
+    if move > max_move:
+        return 0, 0, 0, -1, 0.0, 0.0, 0.0, 0.0, False, move, 0, nan, nan, nan, nan
+    for i in range(3):
+        v = p0d[i] + s * p0d[3 + i]
+        pt[i] = v
+        cf[9 + i] = v
+    code, it, counted, kkt, ep, er, rs, reused = _loop_jit(xp, kx, have, kf, kpos, krot, geo, jinfo, rt, rot, flush,
+                                                           ci, cf, kz, mask, theta0, vscale, escale, xout, ws, kbuf,
+                                                           thr, defer, lim)
+    if code != _LOOP_DONE:
+        return 1, code, it, counted, kkt, ep, er, rs, reused, move, 0, nan, nan, nan, nan
+    nc = pcfl.shape[0]
+    if hint:
+        half = 2.0 * abs(ds * rate0) + 1e-6 * abs(mu0) + 1e-300
+        pcfl[nc - 2] = mu0 + ds * rate0 - half
+        pcfl[nc - 1] = mu0 + ds * rate0 + half
+    else:
+        pcfl[nc - 2] = nan
+        pcfl[nc - 1] = nan
+    j6 = kj6 if reused else kbuf[0]
+    st, k, mu, rate, force = _reuse_jit(xout, xp, ratio * move + 1e-9, j6, ws[1], ws[6], ws[7], ws[11], pci, pcfl,
+                                        pkz, pmask, out)
+    return 2, code, it, counted, kkt, ep, er, rs, reused, move, st, k, mu, rate, force
+
+
 #: numba options of this module's compiled functions: numpy's error model (a division by zero gives
 #: inf or NaN, which the status tests decline, instead of raising and an extra test in every division
 #: loop; the numbers are otherwise the same).
@@ -1232,6 +1290,10 @@ _point_jit = _point_loops  # the point kernel :func:`_fused_point_loops` calls (
 _fused = None  # the compiled (_predict_loops, _fused_point_loops, _scaled_diff, _predict2_loops) once loaded
 _compiled = None  # the compiled _point_loops once loaded, False when numba is unavailable
 _reuse = None  # the compiled _reuse_point_loops once loaded (compiled())
+_step = None  # the compiled _step_loops once loaded (step()), False where it cannot be
+#: (the compiled callees of _step_loops: set by step() before it compiles it)
+_predict_jit = _predict2_jit = _loop_jit = _reuse_jit = None
+_LOOP_DONE = 1  # (vjm_pin.solver.kernel.DONE, checked by step())
 #: This module's njit helpers, compiled (before the kernels that call them) by compiled().
 _OWN_HELPERS = ("_sturm_count", "_top_eigpair", "_abs_sums", "_eq28_tangent", "_reduced", "_rate_value", "_householder_r",
                 "_q_both_sides", "_margin_tail", "_lu_factor", "_ns_solve", "_ns_tangent_on", "_ns_tangent")
@@ -1309,6 +1371,28 @@ def reuse():
     if _fused is None:
         compiled()
     return _reuse or None
+
+
+def step():
+    """The compiled :func:`_step_loops` (a curve's common sub-step in one call), loaded with
+    :func:`compiled` and the solver's one-call loop (:func:`vjm_pin.solver.kernel.looped`); None when
+    either cannot be (numba missing, no compiled kinematics)."""
+    global _step, _predict_jit, _predict2_jit, _loop_jit, _reuse_jit
+    if _step is None:
+        from vjm_pin.solver import kernel
+
+        loop = kernel.looped() if fused() is not None else None
+        if loop is None or kernel.DONE != _LOOP_DONE:
+            _step = False
+        else:
+            import numba
+
+            _predict_jit, _predict2_jit, _loop_jit, _reuse_jit = _fused[0], _fused[3], loop, _reuse
+            try:
+                _step = numba.njit(cache=True, **_NJIT)(_step_loops)
+            except RuntimeError:  # no writable cache location: compile in memory
+                _step = numba.njit(**_NJIT)(_step_loops)
+    return _step or None
 
 
 def use_compiled(points_so_far: int) -> bool:

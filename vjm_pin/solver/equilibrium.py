@@ -906,6 +906,43 @@ class EquilibriumSolver:
                 lim)
         return self._looped_finish(ctx, plan, later, fact, out, p_t, r_t, p_t, r_t)
 
+    def _corrector_step(self, ctx, fn, pre, post, pt, r_t):
+        """:meth:`_corrector` with :data:`FRESH` inputs, the prediction before it and the curve's point after
+        it in one compiled call ``fn`` (:func:`vjm_pin.analysis.point_kernel._step_loops`, called with
+        ``pre``, this context's loop arguments as :meth:`_corrector_looped` passes them (the kept state's
+        Jacobian after its rotation), then ``post``): the same calls on the same arrays, the same
+        caches. ``pt`` is the fresh (3,) array ``fn`` writes the target position into, ``r_t`` the
+        kept target rotation (C-contiguous float64). Returns ``(out, raw)``: ``fn``'s tuple and the raw
+        equilibrium of :meth:`_looped_finish` (None unless converged: ``_fast_its`` set as there), or
+        None when the one-call loop is not set up for ``ctx`` (call :meth:`_corrector`)."""
+        kernel = _kernel
+        c = kernel._compiled
+        lf = c if c and ctx[0] != "0" else kernel.get(ctx[0])
+        route = ctx[11] if len(ctx) > 11 else None
+        if (route is None or route[0] is not lf or ctx[4] is not lf or ctx[10] is not route[1]
+                or route[2] is not self.kin or route[3] != self._fast_max_iter):
+            route = self._corrector_route(ctx, lf)
+            if route is None:
+                return None
+        step_fn, plan, kin, _, lim, ck, rot, defer, later, spectrum = route
+        _, _, kbuf, ci, cf, kz, mask, theta0, vscale, escale, thr = plan[:11]
+        xout, ws = ctx[6]
+        fact = self._fast_fact
+        if fact is not None and fact[1] is kin and fact[-1] is step_fn:
+            kst = fact[2]
+            out = fn(*pre, np.frombuffer(fact[0]), True, fact[3:11], kst.position, kst.rotation, kst.jacobian, ck[3],
+                     ck[4], r_t, rot, bool(_chain._flush_enabled), ci, cf, kz, mask, theta0, vscale, escale, xout, ws,
+                     kbuf, thr, defer, lim, *post)
+        else:
+            dummy = _KERNEL_DUMMY
+            out = fn(*pre, _NO_KEY, False, dummy[:8], dummy[3], dummy[0], dummy[0], ck[3], ck[4], r_t, rot,
+                     bool(_chain._flush_enabled), ci, cf, kz, mask, theta0, vscale, escale, xout, ws, kbuf, thr,
+                     defer, lim, *post)
+        if out[0] == 0:  # rejected by the prediction's move: the corrector did not run
+            return out, None
+        self._fast_its = 0
+        return out, self._looped_finish(ctx, plan, later, fact, out[1:9], pt, r_t, pt, r_t)
+
     def _looped_finish(self, ctx, plan, later, fact, out, pt, rt, p_t, r_t):
         """After the one-call compiled loop (:func:`vjm_pin.solver.kernel._iterations_into`, its
         returned tuple ``out``) of :meth:`_fused_looped` and :meth:`_corrector_looped`: None where it
