@@ -117,3 +117,55 @@ def test_serial_and_mechanism_verify_agree_on_a_chain():
         serial.checks["stiffness_relative_error"] <= 1e-3 and check.stiffness_relative_error <= 1e-3
     )
     np.testing.assert_allclose(mres.deflection, serial.deflection, rtol=1e-7, atol=1e-12)
+
+
+def test_stiffness_fd_error_confirms_an_exactly_zero_stiffness_and_catches_a_small_wrong_one(monkeypatch):
+    """An unloaded mechanism direction (Model B Π at zero load): ``K_C u = 0`` exactly while the
+    re-solved wrench grows as ``h³`` (a cubic spring) and carries the re-solves' rounding (±1e-24 N,
+    as measured there). Against a floor of 1e-12 of the largest entry that zero is not confirmed at
+    any step; against :data:`ZERO_STIFFNESS` it is, and a stiffness of 1e-6 of the largest along that
+    direction, where the truth is zero, is still caught."""
+    from vjm_pin.solver import checks
+
+    task, lc = (0, 1), 2.7
+    k = np.diag([1.5, 0.0])
+    cubic, noise = 3.0, 1e-24  # N/m³ along y; N
+    calls = {"n": 0}
+
+    def wrench(dt):
+        calls["n"] += 1
+        d = dt[list(task)]
+        return k @ d + np.array([0.0, cubic * d[1] ** 3]) + noise * (-1.0) ** calls["n"]
+
+    u = softest_direction(k, task, lc)
+    assert abs(u[1]) == pytest.approx(1.0)
+    assert stiffness_fd_error(k, u, task, lc, wrench, 1e-3) <= 1e-3
+    wrong = k + 1e-6 * 1.5 * np.outer(u, u)
+    assert stiffness_fd_error(wrong, u, task, lc, wrench, 1e-3) > 1e-3
+    monkeypatch.setattr(checks, "ZERO_STIFFNESS", 1e-12)
+    assert stiffness_fd_error(k, u, task, lc, wrench, 1e-3) > 1e-3
+
+
+def test_unloaded_mechanism_directions_pass_the_check_through_the_cli():
+    """Model B Π and C Π at zero load: K_C has an exactly zero entry (the unloaded chain turns
+    freely about it to first order); ``vjm-pin analyze`` reports it, checked (exit 0), instead of
+    refusing it, with ``K_C`` equal to the unloaded stiffness."""
+    import contextlib
+    import io
+    import json
+
+    from vjm_pin.cli import main
+
+    for name in ("paper-b-pi", "paper-c-pi"):
+        buf = io.StringIO()
+        with contextlib.redirect_stdout(buf):
+            rc = main(["analyze", name, "--json"])
+        assert rc == 0
+        out = json.loads(buf.getvalue())
+        kc, k0 = np.array(out["stiffness"], float), np.array(out["stiffness_unloaded"], float)
+        t = out["task"] if isinstance(out["task"][0], int) else [["x", "y", "z", "rx", "ry", "rz"].index(c)
+                                                                  for c in out["task"]]
+        kt = kc[np.ix_(t, t)]
+        assert np.abs(kt).max() > 0 and np.abs(np.diag(kt)).min() <= 1e-12 * np.abs(kt).max()
+        assert np.allclose(kc, k0, rtol=1e-9, atol=1e-12 * np.abs(k0).max())
+        assert out["checks"]["stiffness_checked"] and out["checks"]["stiffness_ok"]

@@ -25,6 +25,11 @@ import numpy as np
 #: Displacement steps of the central differences of :func:`stiffness_fd_error` (× L_c, m; rad
 #: along rotations after the scaling of :func:`softest_direction`), tried in this order.
 FD_STEPS = (1e-6, 1e-8, 1e-10)
+#: :func:`stiffness_fd_error` compares ``K_C u`` relative to the larger of it, the difference and this
+#: fraction of the largest entry of ``K_C`` (rotations scaled by L_c): a stiffness below it is zero to
+#: the check (an unloaded mechanism direction, Model B Π: ``K_C u = 0`` exactly while the re-solved
+#: wrenches grow as ``h³``; against its own size alone that exact zero could never be confirmed).
+ZERO_STIFFNESS = 1e-9
 
 
 def statics_relative(r, tau, prism, force, moment, length, floor=1e-300) -> float:
@@ -89,10 +94,15 @@ def stiffness_fd_error(
     m, δφ rad, zero off the task) and returns its task wrench (m,) (N, N·m), or None when no
     equilibrium was found. Steps ``h`` = :data:`FD_STEPS` × ``length`` are tried in turn until
     the error is within ``rtol``; the smallest error is returned (inf when no step could be
-    re-solved on both sides).
+    re-solved on both sides). The error is relative to the larger of ``|K_C u|``, the difference's
+    size and :data:`ZERO_STIFFNESS` × the largest entry of ``K_C`` (rotation rows and columns scaled
+    by ``length``, as :func:`softest_direction` weighs them): a soft direction is checked against its
+    own stiffness down to that floor, and an exactly zero one is confirmed to it.
     """
     task = list(task)
     ku = k @ u
+    dsc = np.where(np.array(task) < 3, 1.0, 1.0 / length)
+    floor = ZERO_STIFFNESS * float(np.abs(dsc[:, None] * k * dsc[None, :]).max()) if k.size else 0.0
     best = np.inf
     for step in FD_STEPS:
         h = step * length
@@ -107,7 +117,7 @@ def stiffness_fd_error(
         if len(fs) < 2:
             continue
         fd = (fs[0] - fs[1]) / (2 * h)
-        den = max(np.linalg.norm(ku), np.linalg.norm(fd), 1e-12 * np.abs(k).max(), 1e-300)
+        den = max(np.linalg.norm(ku), np.linalg.norm(fd), floor, 1e-300)
         best = min(best, float(np.linalg.norm(ku - fd) / den))
         if best <= rtol:
             break
