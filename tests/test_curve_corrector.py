@@ -156,6 +156,41 @@ def test_point_kernel_declining_falls_back_to_the_generic_point(monkeypatch):
     _assert_same_curve(fused, general)
 
 
+@pytest.mark.parametrize("merged", [True, False], ids=["merged", "three-calls"])
+def test_point_kernel_raising_falls_back_to_the_generic_point(merged, monkeypatch):
+    """numba's ``np.linalg`` raises ``LinAlgError`` on an exactly singular matrix: a point kernel that
+    raises (here: every call) hands the point to ``_Tracer.point``, merged or not, and the curve is
+    still the general path's."""
+    from vjm_pin.analysis import point_kernel as pk
+
+    pytest.importorskip("numba")
+    if not pk.compiled():
+        pytest.skip("numba is not importable here")
+    monkeypatch.setenv("VJM_PIN_JIT", "1")
+    vm = resolve_model("paper-c-s")
+    general = _trace(vm, [-1, 0, 0], 0.004, 20, False)
+    raised = {"n": 0}
+
+    def raising(*args):
+        raised["n"] += 1
+        raise np.linalg.LinAlgError("singular")
+
+    monkeypatch.setattr(pk, "_reuse", raising)  # the unmerged step's point on the corrector's QR
+    monkeypatch.setattr(pk, "_step", raising if merged else False)  # the merged step (False: not used)
+    monkeypatch.setattr(curve_mod, "_merged", merged)
+    generic = {"n": 0}
+    original_point = curve_mod._Tracer.point
+
+    def point(self, eq, s):
+        generic["n"] += 1
+        return original_point(self, eq, s)
+
+    monkeypatch.setattr(curve_mod._Tracer, "point", point)
+    fused = _trace(vm, [-1, 0, 0], 0.004, 20, True)
+    assert raised["n"] >= 20 and generic["n"] >= 20
+    _assert_same_curve(fused, general)
+
+
 @pytest.mark.parametrize("name", ["paper-c-s", "paper-b-z"])
 def test_corrector_is_the_local_solve(jit, name):
     """``EquilibriumSolver._corrector`` from predicted starts: the equilibrium, iterations, residuals

@@ -839,14 +839,23 @@ class _Tracer:
         st = res[10]
         if st < 0:  # the corrector strayed
             return None
+        return self._step_point(a, s, t, raw, pt, rt[1], st, res[11], res[12], res[13], res[14], out)
+
+    def _step_point(self, a: _BP, s: float, t, raw, p_t, r_t, st, k, mu, rate, force, out) -> _BP:
+        """The point of a converged fused step (:meth:`_fused_step`, :meth:`_merged_step`) from the
+        corrector's raw equilibrium and the point kernel's answer: the generic :meth:`point` where the
+        kernel declined (``st``), else ``k``, ``μ``, ``dμ/ds``, ``dᵀF`` (``force``; None: from the wrench)
+        and the tangent (``out``: ``(δx, δF)`` laid out (nq + 6,), or the pair itself); a :class:`_LateBP`
+        where the corrector certified "stable" without the eigenvalues."""
         self._npts += 1
-        eq = solver._corrector_result(raw, pt, rt[1])
+        eq = self.cont._corrector_result(raw, p_t, r_t)
         if st:  # the point kernel declines: the generic path (Blocks kept by the corrector)
             p = self.point(eq, s)
         else:
-            k, mu, rate, force = res[11], res[12], res[13], res[14]
-            tan = (out[:nq], out[nq:])
+            tan = out if type(out) is tuple else (out[:self._nq], out[self._nq:])
             ev = raw[5]
+            if force is None:
+                force = self.d @ eq.wrench
             if ev is None:  # "stable" certified, the eigenvalues when first read (_LateBP)
                 p = _LateBP.with_tangent(s, eq, force, k, mu, raw[7],
                                          rate if self.mask is not None and _analytic_rate else None, tan)
@@ -944,11 +953,12 @@ class _Tracer:
                 cfl[-2], cfl[-1] = mu0 + ds * rate0 - half, mu0 + ds * rate0 + half
             else:
                 cfl[-2] = cfl[-1] = math.nan
+            k = mu = rate = force = tan = None  # (st = 1 below: the generic point)
             try:
                 wt = raw[8]  # the corrector's (Qᵀ W Q)ᵀ at the convergence (None: computed by the kernel)
+                wt = _NO_WT if wt is None or not _reuse_wt else wt
                 st, k, mu, rate, force = pa[0](raw[0], x_pred, CORRECTOR_RATIO * move + 1e-9, raw[3].jacobian, kf[1],
-                                               kf[6], kf[7], _NO_WT if wt is None or not _reuse_wt else wt, pa[1], pa[2], pa[3], pa[4],
-                                               out)
+                                               kf[6], kf[7], wt, pa[1], pa[2], pa[3], pa[4], out)
             except np.linalg.LinAlgError:  # an exactly singular matrix (numba's np.linalg raises): after the check
                 st = 1
             if not st:
@@ -962,6 +972,7 @@ class _Tracer:
                                     SINGULAR_RCOND, np.zeros(6))
             x_dot = np.empty(self._nq)
             w_dot = np.empty(6)
+            k = mu = rate = None  # (st = 1 below: the generic point)
             try:
                 st, k, mu, rate = fz[1](raw[0], x_pred, CORRECTOR_RATIO * move + 1e-9, self.free, self.var_scale,
                                         raw[3].jacobian, kf[6], pa[0], pa[1], pa[2], pa[3], kf[7] if pa[5] else pa[8],
@@ -972,26 +983,7 @@ class _Tracer:
             force = None
         if st < 0:  # the corrector strayed
             return None
-        self._npts += 1
-        eq = solver._corrector_result(raw, p_t, r_t)
-        if st:  # the point kernel declines: the generic path (Blocks kept by the corrector)
-            p = self.point(eq, s)
-        else:
-            ev = raw[5]
-            if force is None:
-                force = self.d @ eq.wrench
-            if ev is None:  # "stable" certified, the eigenvalues when first read (_LateBP)
-                p = _LateBP.with_tangent(s, eq, force, k, mu, raw[7],
-                                         rate if self.mask is not None and _analytic_rate else None, tan)
-            else:
-                lam = float(ev[-1]) if ev.size else -np.inf  # (ascending: _max_eig)
-                p = _BP(s, eq, force, k, None, mu, lam)
-                if self.mask is not None and _analytic_rate:
-                    p.dmu = rate
-                p.tan = tan
-        if self.second_order:
-            p.hist = (a.s, t[0], t[1])
-        return p
+        return self._step_point(a, s, t, raw, p_t, r_t, st, k, mu, rate, force, tan)
 
     def _reuse_setup(self) -> None:
         """Whether the fused step's point may run on the corrector's own factorisation
@@ -1457,12 +1449,11 @@ def _reference_equilibrium(vm, solver, kin) -> EquilibriumResult | None:
 
 def _reference_x(vm) -> np.ndarray | None:
     """A copy of the reference configuration, or None when a spring is preloaded there (not an
-    equilibrium without load)."""
-    x = np.asarray(vm.reference, float).copy()
-    stat = vm.K_theta @ (x[vm.theta_idx] - vm.theta0)
-    if stat.size and np.abs(stat).max() > 0:
-        return None
-    return x
+    equilibrium without load): the solver's rule (``equilibrium.reference_if_unloaded``, also behind
+    ``EquilibriumSolver.solve`` at a zero deflection)."""
+    from vjm_pin.solver.equilibrium import reference_if_unloaded
+
+    return reference_if_unloaded(vm)
 
 
 def _reference_result(vm, solver, x: np.ndarray, stability) -> EquilibriumResult:

@@ -1945,11 +1945,8 @@ class EquilibriumSolver:
             return None
         if d.ndim != 1 or d.size not in (3, 6, len(self.task)) or not (_all_finite(d) and not d.any()):
             return None
-        vm = self.vm
-        x = vm.reference.copy()
-        if vm.K_theta.size and np.any(vm.K_theta @ (x[vm.theta_idx] - vm.theta0)):
-            return None
-        if self._start_regular(x):
+        x = reference_if_unloaded(self.vm)
+        if x is None or self._start_regular(x):
             return None
         state = self.kin.evaluate(x, hessian=False)
         return self._result(x, np.zeros(len(self.task)), 0, True, state, self.p0, self.r0, "reference")
@@ -2709,6 +2706,16 @@ class EquilibriumSolver:
             "stiffness_relative_error": best,
             "stiffness_ok": bool(best <= rtol),
         }
+
+
+def reference_if_unloaded(vm: VjmModel) -> np.ndarray | None:
+    """A copy of the reference configuration when it is an equilibrium without load (no spring
+    preloaded there: ``K_θ(θ − θ₀) = 0``), else None."""
+    x = np.asarray(vm.reference, float).copy()
+    stat = vm.K_theta @ (x[vm.theta_idx] - vm.theta0)
+    if stat.size and np.abs(stat).max() > 0:
+        return None
+    return x
 
 
 def solve_equilibrium(vm: VjmModel, deflection=None, *, target=None, **kwargs) -> EquilibriumResult:
