@@ -116,6 +116,7 @@ from vjm_pin.solver.mechanism import MechanismSolver, _null_basis
 from vjm_pin.solver.stability import (
     DeferredStability,
     check_stability_held,
+    STABILITY_TOL,
     null_space,
     spectral_norm,
 )
@@ -130,6 +131,12 @@ MAX_ITER = 40
 #: critical deflection, else (no estimate) this fraction of the chain length (m) or 1 rad.
 RANGE_FACTOR = 4.0
 RANGE_NO_ESTIMATE = 0.5
+#: Without ``max_deflection``, a linearised estimate of the critical deflection beyond this ×
+#: the chain length (m; or rad) is discarded as rounding (:func:`_search_from`).
+ESTIMATE_MAX = 10.0
+#: A bracket end whose force departs from the other end's by more than this × the tangent
+#: stiffness × their distance lies on another branch (:meth:`_Search.continuous`).
+JUMP_FACTOR = 8.0
 
 
 @dataclass(frozen=True)
@@ -602,13 +609,16 @@ def _critical_mechanism(vm, d, solver, max_deflection, rtol, max_iter, loads, gr
         check_free_start(vm, tr, p0)  # a mechanism with only d held: no path to search
     if rigid or not np.isfinite(p0.k):
         return _rigid(vm, tr, p0, d)
-    if p0.mu >= 0:
-        raise NoCriticalPoint(
-            "the start (the loaded equilibrium at zero deflection) is already unstable under a "
-            f"force along the direction (force-control margin {-p0.mu:.3g}): no critical point "
-            "to approach",
-            max_deflection=0.0,
-        )
+    p0, pre = _stable_start(
+        vm,
+        tr,
+        p0,
+        max_deflection,
+        r0,
+        "the start (the loaded equilibrium at zero deflection)"
+        if loads or gravity is not None
+        else "the unloaded equilibrium",
+    )
     # the smaller of the frozen-geometry estimate and one Newton step on μ from the start (the
     # least-squares reactions of the former overestimate where the load shares by compliance:
     # 1.8× on the two-column robot; the latter where μ curves: 2.6× on Model C S)
@@ -618,7 +628,7 @@ def _critical_mechanism(vm, d, solver, max_deflection, rtol, max_iter, loads, gr
         est.append(-p0.mu / g * p0.k)
     est = [e for e in est if e is not None and np.isfinite(e) and e > 0]
     df = min(est) if est and p0.k > 0 else None  # a falling start: no estimate (as serial)
-    return _search_from(vm, tr, p0, df, max_deflection, r0, rtol, max_iter)
+    return _search_from(vm, tr, p0, df, max_deflection, r0, rtol, max_iter, pre=pre)
 
 
 def _scan(tr: _Tracer, lo, q, depth: int = 0):
@@ -646,6 +656,12 @@ def _scan(tr: _Tracer, lo, q, depth: int = 0):
     return tr.first_event(lo, m) or _scan(tr, m, q, depth + 1)
 
 
+def _predicted(p) -> bool:
+    """Whether the point ``p`` is a tangent prediction (:meth:`_Tracer.reach_or_predict`), not a
+    converged equilibrium."""
+    return getattr(p.eq, "path", "") == "tangent-prediction"
+
+
 def _newton_point(p, g, lo, hi, flo, fhi) -> float:
     """The next trial deflection: Newton on μ from ``p`` with the rate ``g`` (``dμ/ds``) when it
     stays inside the bracket ``[lo, hi]``, else the regula falsi point of the bracket with the
@@ -668,6 +684,7 @@ class _Search:
         self.message = ""
         self.location = float("nan")  # the relative force tolerance met (done)
         self.stable_to_end = False  # the branch stayed stable under force control up to s_max
+        self.path_end = False  # the march met a deflection past which the path has no equilibrium
         self.best = None  # the point of the branch nearest to the critical point so far
         self.g_last = float("nan")  # the last available dμ/ds (the kernel may decline at a point)
 
@@ -681,10 +698,13 @@ class _Search:
         return self.g_last
 
     def evaluate(self, base, s):
+        """The branch of ``base`` at ``s``: a converged equilibrium, or (within a fine step of a
+        converged ``base`` only) the tangent prediction where the corrector fails; never a
+        prediction from a prediction (past the end of the reach such chains are phantoms)."""
         self.n += 1
         return (
             self.tr.reach_or_predict(base, s)
-            if abs(s - base.s) <= FINE_STEP * self.s_max
+            if abs(s - base.s) <= FINE_STEP * self.s_max and not _predicted(base)
             else self.tr.reach(base, s)
         )
 
@@ -694,8 +714,22 @@ class _Search:
         (:data:`~vjm_pin.analysis.curve.FINE_STEP` of the range; a longer step may have jumped
         across a knee onto a neighbouring branch, next to an imperfect bifurcation, where the
         straight branch the predictor follows crosses zero), so ``m`` is trusted when that close
-        to ``lo``."""
-        return m.s - lo.s <= FINE_STEP * self.s_max
+        to ``lo``, and its force continues ``lo``'s (:meth:`continuous`)."""
+        return m.s - lo.s <= FINE_STEP * self.s_max and self.continuous(lo, m)
+
+    @staticmethod
+    def continuous(lo, m) -> bool:
+        """Whether the force at ``m`` continues ``lo``'s: within ``JUMP_FACTOR`` × the larger
+        tangent stiffness times the distance (and rounding) of it. A point reached over a
+        long step from the far side of a knee can lie on a neighbouring branch (the straight one,
+        unstable, of an imperfect bifurcation; the Orthoglide's coupled legs pushed down): as the
+        bracket narrows its force stays apart from ``lo``'s, so the bracket holds no crossing of
+        ``lo``'s branch however narrow it gets."""
+        ds = abs(m.s - lo.s)
+        ks = [abs(k) for k in (lo.k, m.k) if np.isfinite(k)]
+        k = max(ks) if ks else float("inf")
+        tol = JUMP_FACTOR * k * ds + 1e-9 * max(abs(lo.force), abs(m.force))
+        return bool(abs(m.force - lo.force) <= tol)
 
     def done(self, p, lo, hi, hi_ok: bool = True) -> bool:
         """The tracer's stopping rule (the bracket, or one more Newton step, moves the force by
@@ -722,17 +756,30 @@ class _Search:
     def bracket(self, lo, s):
         """March from ``lo`` (μ < 0): returns the first event ``(kind, a, b)`` or None."""
         tr = self.tr
+        s_fail = float("inf")  # the nearest deflection ahead that could not be reached
         while self.n < self.max_iter:
             s = min(s, self.s_max)
+            if s >= s_fail:  # no further than halfway to a deflection already out of reach
+                s = lo.s + 0.5 * (s_fail - lo.s)
+            if s_fail - lo.s <= max(tr.hmin, 1e-9 * abs(lo.s)):
+                self.message = (
+                    f"the loading path could not be continued past deflection {lo.s:.6g} "
+                    "(no equilibrium beyond it: the end of the reach along the direction?)"
+                )
+                self.path_end = True
+                self.best = lo if lo.s > 0 else self.best
+                return None
             q = self.evaluate(lo, s)
             if q is None:
-                h = 0.5 * (s - lo.s)
-                if h < tr.hmin:
-                    self.message = (
-                        f"the loading path could not be continued past deflection {lo.s:.6g}"
-                    )
-                    return None
-                s = lo.s + h
+                s_fail = s
+                s = lo.s + 0.5 * (s - lo.s)
+                continue
+            if np.isfinite(s_fail) and _predicted(q):
+                # short of a deflection out of reach the corrector failed again and only the
+                # tangent prediction is left (not an equilibrium; past the end of the reach it
+                # is a phantom): the path is not marched along predictions
+                s_fail = s
+                s = lo.s + 0.5 * (s - lo.s)
                 continue
             ev = _scan(tr, lo, q)
             if ev is not None:
@@ -749,7 +796,7 @@ class _Search:
             # Newton ahead, at most quadrupling the deflection (doubling without a Newton point)
             s = nxt if np.isfinite(nxt) else 2.0 * lo.s
             s = min(max(s, lo.s + tr.hmin), lo.s + 4.0 * max(lo.s, tr.hmin))
-        self.message = f"no bracket of the critical point within {self.max_iter} evaluations"
+        self.message = f"the search stopped after {self.max_iter} equilibrium evaluations (no bracket of a critical point)"
         return None
 
     def root(self, lo, hi):
@@ -798,6 +845,11 @@ class _Search:
                 prev, lo, flo = lo, m, m.mu
                 fhi, side = (0.5 * fhi if side == -1 else fhi), -1  # Illinois: no stalled end
                 hi_ok = hi_ok or self.consistent(lo, hi)
+                if not hi_ok and hi.s - lo.s <= FINE_STEP * self.s_max:
+                    # hi is a fine step away and its force does not continue lo's: it lies on
+                    # another branch; the march goes on from lo past it
+                    self.best = m
+                    return ("resume", lo, hi)
             else:
                 ok = hi_ok if base is hi else self.consistent(lo, m)
                 hi, fhi, hi_ok, rejected, stalled = m, m.mu, ok, not ok, False
@@ -877,15 +929,19 @@ def critical_load(
 
     Returns:
         The :class:`CriticalLoad`; ``converged`` False (with ``message``) when the search did
-        not meet its tolerance: the best point found is returned, not hidden.
+        not meet its tolerance (a bracket not resolved, or the budget spent before a bracket):
+        the best point found is returned, not hidden, and is not a located critical point.
 
     Raises:
         InputError: bad direction or options, a solver of the wrong kind or for another model,
             dead loads given both here and to the solver, ``free`` along a rotation.
         FreeMechanism: with ``free`` the start is a mechanism (a motion of zero stiffness with
             only ``d`` held, :func:`~vjm_pin.analysis.curve.check_free_start`).
-        NoCriticalPoint: the followed branch stays stable under a force along the direction
-            up to ``max_deflection``.
+        NoCriticalPoint: no critical point was bracketed: the followed branch stays stable
+            under a force along the direction up to ``max_deflection``, or up to where the
+            loading path cannot be continued (the end of the reach); the start is already
+            unstable under that force (beyond the rounding band of :func:`margin_threshold`), or
+            neutral (zero stiffness) and the branch does not become stable (:func:`_stable_start`).
         NoEquilibrium: no unloaded equilibrium to start from.
     """
     if not (isinstance(rtol, (int, float)) and 1e-13 <= rtol <= 0.1):
@@ -922,41 +978,131 @@ def critical_load(
     p0 = _start(vm, tr, solver, d)
     if not np.isfinite(p0.k):
         return _rigid(vm, tr, p0, d)
-    if p0.mu >= 0:
-        raise NoCriticalPoint(
-            "the unloaded equilibrium is already unstable under a force along the direction "
-            f"(force-control margin {-p0.mu:.3g}): no critical point to approach",
-            max_deflection=0.0,
-        )
+    p0, pre = _stable_start(vm, tr, p0, max_deflection, r0, "the unloaded equilibrium")
     df = linearised_load(tr, p0)
     start = (
         _refined_start(tr, p0, df, rtol, max_deflection) if df is not None and _chain(tr) else None
     )
-    return _search_from(vm, tr, p0, df, max_deflection, r0, rtol, max_iter, start)
+    return _search_from(vm, tr, p0, df, max_deflection, r0, rtol, max_iter, start, pre=pre)
 
 
-def _search_from(vm, tr, p0, df, max_deflection, r0, rtol, max_iter, start=None) -> CriticalLoad:
+def margin_threshold(vm, tr) -> float:
+    """The rounding band of the force-control margin ``μ``: ``STABILITY_TOL·‖K_θ‖₂`` (the serial
+    tracer's ``thr``, the mechanism solver's ``threshold``); ``|μ|`` within it is zero (a neutral
+    direction), not a verdict."""
+    scale = getattr(tr, "k_norm", None)
+    if scale is None:
+        scale = spectral_norm(vm.K_theta) if vm.K_theta.size else 1.0
+    return max(STABILITY_TOL * scale, float(getattr(tr, "verdict_thr", 0.0) or 0.0))
+
+
+#: From a neutral start (``|μ| ≤`` :func:`margin_threshold`) the first step along the path is
+#: this fraction of the search range, doubled until the margin leaves the rounding band.
+NEUTRAL_FIRST = 1e-3
+#: ... in at most this many equilibrium evaluations.
+NEUTRAL_EVALS = 20
+
+
+def _stable_start(vm, tr, p0, max_deflection, r0, what: str):
+    """``(p, n)``: the point the search starts from and the equilibria evaluated to find it.
+
+    ``p0`` itself when its force-control margin is clearly stable (``μ < −thr``,
+    :func:`margin_threshold`). A margin within the rounding band of zero is a neutral start (zero
+    stiffness along ``d`` there, e.g. a mechanism direction that stiffens with the deflection:
+    Model B Π along y): the followed branch is stepped along from it (as ``trace_curve`` goes on
+    from it) to its first point with a clearly stable margin, where the search starts (and its
+    linearised estimate is taken). Raises :class:`~vjm_pin.exceptions.NoCriticalPoint` when the
+    start is clearly unstable (``μ > thr``), or neutral and the branch does not become stable."""
+    thr = margin_threshold(vm, tr)
+    unit = "rad" if np.any(tr.d[3:]) else "m"
+    if p0.mu < -thr:
+        return p0, 0
+    if p0.mu > thr:
+        raise NoCriticalPoint(
+            f"{what} is already unstable under a force along the direction (force-control "
+            f"margin {-p0.mu:.3g}, beyond the rounding threshold {thr:.2g}): no critical point to "
+            "approach",
+            max_deflection=0.0,
+        )
+    neutral = (
+        f"{what} is neutral along the direction (zero stiffness: force-control margin "
+        f"{-p0.mu:.2g}, zero to within the rounding threshold {thr:.2g})"
+    )
+    s_range = float(max_deflection) if max_deflection else RANGE_NO_ESTIMATE * r0
+    s, cur, n = NEUTRAL_FIRST * s_range, p0, 0
+    while n < NEUTRAL_EVALS:
+        s = min(s, s_range)
+        q = tr.reach(cur, s)
+        n += 1
+        if q is None:
+            s = cur.s + 0.5 * (s - cur.s)
+            continue
+        if q.mu < -thr:
+            return q, n
+        if q.mu > thr:
+            raise NoCriticalPoint(
+                f"no critical point: {neutral}, and the followed branch is unstable under a force "
+                f"along it from there (force-control margin {-q.mu:.3g} at deflection "
+                f"{q.s:.6g} {unit})",
+                max_deflection=q.s,
+            )
+        cur = q
+        if cur.s >= s_range:
+            raise NoCriticalPoint(
+                f"no critical point: {neutral}, and stays neutral up to deflection "
+                f"{cur.s:.6g} {unit}",
+                max_deflection=cur.s,
+            )
+        s = 2.0 * s
+    raise NoCriticalPoint(
+        f"no critical point located: {neutral}, and the loading path could not be continued "
+        f"past deflection {cur.s:.6g} {unit}",
+        max_deflection=cur.s,
+    )
+
+
+def _search_from(
+    vm, tr, p0, df, max_deflection, r0, rtol, max_iter, start=None, pre: int = 0
+) -> CriticalLoad:
     """Steps 3–4 of the module docstring from the start ``p0`` (``μ < 0``, finite stiffness)
     with the load increment ``df`` of the linearised estimate (or None): serial and mechanism
     tracers alike. ``start``: the first deflection to evaluate instead of the estimate's
-    (:func:`_refined_start`); the search range is the estimate's either way."""
+    (:func:`_refined_start`); the search range is the estimate's either way. ``pre``: equilibria
+    already evaluated to reach ``p0`` (:func:`_stable_start`), counted in ``iterations``.
+
+    Without ``max_deflection`` an estimate beyond :data:`ESTIMATE_MAX` × the chain's length (or
+    rad) is discarded: the frozen-geometry pencil's eigenvalue is then rounding (nothing along
+    the path compresses the chain: a portal frame pushed sideways), not an estimate.
+
+    No critical point is reported (:class:`~vjm_pin.exceptions.NoCriticalPoint`) unless one was
+    bracketed: the branch stable up to the end of the range, or up to where the path could not
+    be continued or the evaluations ran out (each message says which, and the deflection
+    reached). A bracket whose root was not located to ``rtol`` returns the nearest point with
+    ``converged`` False."""
     rotation = bool(np.any(tr.d[3:]))
+    unit = "rad" if rotation else "m"
     s_est = p0.s + df / p0.k if df is not None else float("nan")
+    if max_deflection is None and np.isfinite(s_est) and s_est > ESTIMATE_MAX * r0:
+        df, s_est = None, float("nan")
     if max_deflection is not None:
         s_max = float(max_deflection)
     else:
         s_max = RANGE_FACTOR * s_est if np.isfinite(s_est) else RANGE_NO_ESTIMATE * r0
-    search = _Search(tr, rtol, int(max_iter), s_max)
+    search = _Search(tr, rtol, int(max_iter) + pre, s_max)
+    search.n = pre
     tr.seg_margin = max(0.0, -p0.mu)
     tr.dmu(p0)
-    lo, ev, c = p0, None, None
+    lo, ev, c, bracketed = p0, None, None, False
     s = s_est if np.isfinite(s_est) and 0 < s_est else s_max / 16
     if start is not None and p0.s < start < s_max:
         s = start
+    if s <= p0.s:  # a start stepped along the path (_stable_start): ahead of it
+        s = min(max(2.0 * p0.s, p0.s + s_max / 16), s_max)
     while search.n < search.max_iter:
         ev = search.bracket(lo, s) if ev is None else ev
         if ev is None:
             break
+        bracketed = True
         kind, a, b = ev
         if kind == "near":
             c = b
@@ -966,23 +1112,38 @@ def _search_from(vm, tr, p0, df, max_deflection, r0, rtol, max_iter, start=None)
             if 0 < -c.mu <= IMPERFECT_RATIO * max(tr.seg_margin, -a.mu):
                 return _result(vm, tr, c, "imperfect", df, p0, search, True)
             tr.seg_margin = max(tr.seg_margin, -a.mu, -b.mu)
-            lo, ev, c, s = b, None, None, b.s + (b.s - a.s)  # not critical: march on
+            lo, ev, c, s, bracketed = b, None, None, b.s + (b.s - a.s), False  # march on
             continue
         c = search.root(a, b)
+        if isinstance(c, tuple) and c[0] == "resume":  # the bracket's end on another branch
+            lo, ev, s, bracketed = c[1], None, c[2].s + (c[2].s - c[1].s), False
+            c = None
+            continue
         if isinstance(c, tuple):  # an earlier event found inside the bracket
             ev = c
             continue
         break
     if c is None:
-        if search.stable_to_end or search.best is None:
+        if search.stable_to_end:
             raise NoCriticalPoint(
                 "no critical point: the followed branch stays stable under a force along the "
-                f"direction up to deflection {s_max:.6g} {'rad' if rotation else 'm'}"
-                if search.stable_to_end
-                else f"no critical point located: {search.message}",
+                f"direction up to deflection {s_max:.6g} {unit} (the end of the search range)",
                 max_deflection=s_max,
             )
-        # not converged: the nearest point reached is reported with the reason, not hidden
+        far = search.best if search.best is not None else p0
+        if not bracketed:
+            stable = (
+                "no critical point found: the followed branch stays stable under a force along "
+                f"the direction up to deflection {far.s:.6g} {unit} (force {far.force:.6g} "
+                f"{'N·m' if rotation else 'N'}), of the {s_max:.6g} {unit} searched"
+            )
+            if search.path_end or search.best is None:
+                raise NoCriticalPoint(
+                    f"{stable}: {search.message or 'the search stopped'}", max_deflection=far.s
+                )
+            # the budget ran out first: the last point reached, flagged (not a critical point)
+            search.message = f"{stable}, where {search.message}"
+        # the nearest point reached is reported with the reason (converged False)
         return _result(
             vm, tr, search.best, _kind(tr, search.best, s_max, search.g_last), df, p0, search, False
         )
@@ -1076,7 +1237,21 @@ def _rigid(vm, tr, p0, d) -> CriticalLoad:
             if np.isnan(p0.k)
             else "the chain is rigid along the direction at the unloaded configuration"
         )
-        raise NoCriticalPoint(f"{what} and no force along it makes it unstable", max_deflection=0.0)
+        if np.isnan(p0.k):
+            # no path at all when not even a short step along d has an equilibrium (Model A S
+            # along y: x held, a straight chain of rigid links cannot move sideways)
+            h = FINE_STEP * tr.range
+            if tr.reach(p0, h) is None:
+                raise NoCriticalPoint(
+                    f"no critical point: {what}, and the end cannot be moved along the direction "
+                    f"from it (no equilibrium at deflection {h:.3g} "
+                    f"{'rad' if np.any(d[3:]) else 'm'}: out of reach with the other task "
+                    "components held)",
+                    max_deflection=0.0,
+                )
+        raise NoCriticalPoint(
+            f"no critical point: {what} and no force along it makes it unstable", max_deflection=0.0
+        )
     f, u = found
     eq = u.eq
     if isinstance(tr, MechanismTracer):

@@ -599,8 +599,9 @@ def _eigenvalues_text(ev) -> str:
 
 
 def _human(vm, robot, out, fmt_matrix) -> str:
-    d = np.asarray(out["deflection"], float)
-    w = np.asarray(out["wrench"], float)
+    # (+ 0.0 throughout: a negative zero prints as 0, not -0)
+    d = np.asarray(out["deflection"], float) + 0.0
+    w = np.asarray(out["wrench"], float) + 0.0
     lines = [f"model {vm.name}: end frame '{vm.frame}', task {' '.join(vm.task_names)}"]
     if robot is not None:
         pose = ", ".join(f"{k}={v:.4g}" for k, v in robot.pose.items() if k in vm.joint_names)
@@ -663,9 +664,9 @@ def _human(vm, robot, out, fmt_matrix) -> str:
     wk = out.get("weakest")
     if wk is not None:
         lines.append(
-            f"weakest translational stiffness (end free to rotate): {wk['stiffness_along'] / 1e3:.4g} N/mm along "
-            f"{np.array2string(np.asarray(wk['direction']), precision=3, suppress_small=True)} (world); "
-            f"with the rotations held: {wk['stiffness_along_rotations_held'] / 1e3:.4g} N/mm"
+            f"weakest translational stiffness (end free to rotate): {wk['stiffness_along'] / 1e3 + 0.0:.4g} N/mm along "
+            f"{np.array2string(np.asarray(wk['direction'], float) + 0.0, precision=3, suppress_small=True)} (world); "
+            f"with the rotations held: {wk['stiffness_along_rotations_held'] / 1e3 + 0.0:.4g} N/mm"
         )
         if wk["free_directions"]:
             lines.append(

@@ -140,7 +140,8 @@ def dump_json(obj) -> str:
 
 
 def fmt_matrix(m: np.ndarray, width: int = 11) -> str:
-    return "\n".join("  " + " ".join(f"{v:{width}.4g}" for v in row) for row in np.asarray(m))
+    # (+ 0.0: a negative zero prints as 0, not -0)
+    return "\n".join("  " + " ".join(f"{v + 0.0:{width}.4g}" for v in row) for row in np.asarray(m))
 
 
 # ----------------------------------------------------------------------------- JSON vocabulary

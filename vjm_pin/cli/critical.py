@@ -125,14 +125,30 @@ def _text(vm, r, loads=(), gravity=None, free=False) -> str:
     else:
         load, du, dv = f"{r.force:.8g} N", "mm", r.deflection * 1e3
     d = np.round(r.direction, 6).tolist()
-    lines = [
-        f"{vm.name}: critical load {load} along {d} ({r.kind}) at deflection {dv:.8g} {du}",
-        (
-            f"  linearised estimate {r.estimate:.8g} {'N·m' if rot else 'N'}; located to "
-            f"{r.residuals['location']:.1e} (relative) in {r.iterations} equilibrium "
-            f"evaluation{'' if r.iterations == 1 else 's'}"
-        ),
-    ]
+    est = (
+        f"linearised estimate {r.estimate:.8g} {'N·m' if rot else 'N'}"
+        if np.isfinite(r.estimate)
+        else "no linearised estimate"
+    )
+    if not r.converged:  # no headline number: the point reached is not a located critical point
+        lines = [
+            f"{vm.name}: NOT CONVERGED along {d}: {r.message}",
+            (
+                f"  the search's last point (not a located critical point): load {load} at "
+                f"deflection {dv:.8g} {du} ({r.kind} by the rule there), {est}, "
+                f"{r.iterations} equilibrium "
+                f"evaluation{'' if r.iterations == 1 else 's'}"
+            ),
+        ]
+    else:
+        lines = [
+            f"{vm.name}: critical load {load} along {d} ({r.kind}) at deflection {dv:.8g} {du}",
+            (
+                f"  {est}; located to "
+                f"{r.residuals['location']:.1e} (relative) in {r.iterations} equilibrium "
+                f"evaluation{'' if r.iterations == 1 else 's'}"
+            ),
+        ]
     if free:
         lines.append("  end free across the direction (only the component along it held)")
     for ld in loads:
@@ -141,8 +157,6 @@ def _text(vm, r, loads=(), gravity=None, free=False) -> str:
         )
     if gravity is not None:
         lines.append("  dead loads: link weights (gravity)")
-    if not r.converged:
-        lines.append(f"  NOT CONVERGED: {r.message}")
     return "\n".join(lines)
 
 
