@@ -137,6 +137,7 @@ def fig4(out: Path) -> dict:
         analytic=[
             ("eq. (35) F_s, F_n", np.r_[d, np.nan, d], np.r_[f_stable(d), np.nan, f_unstable(d)])
         ],
+        inset=False,  # (the critical point is at Δ = 0: a zoom shows only the vertical start)
     )
     ax.axhline(1.0, color="grey", lw=0.6, ls="-.")
     ax.annotate(
@@ -183,6 +184,7 @@ def fig5(out: Path) -> dict:
                 label=f"{m.upper()} {POSTURE_NAMES[p]}",
                 force_label="F / (Kθ/L)",
                 deflection_label="Δ / L",
+                inset=False,  # (this figure draws its own zoom on the critical point below)
             )
             ax.set_ylim(0, 1.25 * max(c.forces))  # room for the legend above the curve
             ax.legend(fontsize=8, loc="upper left")
@@ -194,7 +196,7 @@ def fig5(out: Path) -> dict:
             )
             if m != "a" and c.critical:  # zoom on the critical point as well
                 ins = ax.inset_axes([0.5, 0.12, 0.45, 0.4])
-                plot_curve(c, ins, label="", force_label="", deflection_label="", legend=False)
+                plot_curve(c, ins, label="", force_label="", deflection_label="", legend=False, inset=False)
                 cmax = max([cp.deflection for cp in c.critical] + [0.0])
                 ins.set_xlim(0, max(3 * cmax, 0.02))
                 ins.set_ylim(0, 1.15 * max(cp.force for cp in c.critical))

@@ -195,3 +195,26 @@ def test_cli_json_reports_both_verdicts_and_the_kind(capsys):
     (c,) = data["critical"]
     assert c["kind"] == "imperfect"
     assert isinstance(c["stiffness_before"], float) and isinstance(c["stiffness_after"], float)
+
+
+def test_the_kind_does_not_depend_on_where_the_grid_brackets_a_pitchfork():
+    """Model C Π pushed down (-z): a pitchfork at 0.81428 m. Over 30 steps to 1.05856 m the bracket's
+    far end lay on the bent branch (stable), and the point reached at s_c + ε from it had kept
+    eq. (23), so the tracer called it a limit; over 1.0 m and 1.0586 m a bifurcation. The kind now also
+    asks λ at the critical point to first order (``_Tracer._loses_eq23``, the rule of
+    ``critical_load``): the same kind, force and after-stiffness for every range, and ``critical_load``'s."""
+    from vjm_pin.analysis.critical import critical_load
+
+    vm = resolve_model("paper-c-pi")
+    d = [0.0, 0.0, -1.0]
+    got = []
+    for md in (1.0, 1.0586, 1.05856):
+        c = trace_curve(vm, d, md, steps=30, solver=EquilibriumSolver(vm))
+        assert len(c.critical) == 1
+        got.append(c.critical[0])
+    assert {p.kind for p in got} == {"bifurcation"}
+    for p in got[1:]:
+        assert p.force == pytest.approx(got[0].force, rel=1e-6)
+        assert p.stiffness_after == pytest.approx(got[0].stiffness_after, rel=1e-6)
+    direct = critical_load(vm, d, solver=EquilibriumSolver(vm))
+    assert direct.kind == "bifurcation" and direct.force == pytest.approx(got[0].force, rel=1e-4)

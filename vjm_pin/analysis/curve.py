@@ -1197,7 +1197,7 @@ class _Tracer:
         plus = self.reach_or_predict(hi, c.s + e) if hi.s > c.s + e else None
         plus = plus or self.reach_or_predict(c, c.s + e)
         switched = None
-        if kind != "imperfect" and (plus is None or plus.lam >= -self.thr):
+        if kind != "imperfect" and (plus is None or plus.lam >= -self.thr or self._loses_eq23(c, e)):
             kind = "bifurcation"
             switched = self.switch(c, c.s + e)
             after = switched
@@ -1219,6 +1219,18 @@ class _Tracer:
             critical.append(cp)
         self.seg_margin = 0.0
         return switched, plus
+
+    def _loses_eq23(self, c: _BP, e: float) -> bool:
+        """Whether the continued branch loses eq. (23) at the critical point ``c``, to first order:
+        ``λ(s_c + ε) ≈ λ(s_c) + ε·|dμ/ds| ≥ −thr`` (where it does, eq. 23's critical eigenvector is
+        μ's and λ moves with μ). :meth:`finish` asks it besides the point ``plus`` it reached at
+        ``s_c + ε``: next to a pitchfork that point can lie on the bent branch, which is stable, and
+        a bifurcation would be called a limit depending on where the grid put the bracket
+        (:func:`vjm_pin.analysis.critical._kind` uses the same rule)."""
+        g = self.dmu(c)
+        if not math.isfinite(g):
+            return False
+        return c.lam >= -max(self.thr, e * abs(g))
 
     def process(self, p: _BP, q: _BP, index: int, critical: list) -> _BP:
         """Events over the accepted sub-step ``[p, q]``; returns the followed point that
