@@ -133,14 +133,8 @@ def test_fused_path_is_the_common_step(jit, monkeypatch):
     assert calls["corrector"] == 0
 
 
-def test_point_kernel_declining_falls_back_to_the_generic_point(monkeypatch):
-    """When the compiled point kernel declines (here: its rank test made impossible to pass), the fused
-    step hands the point to ``_Tracer.point`` and the curve is still the general path's."""
-    pytest.importorskip("numba")
-    monkeypatch.setenv("VJM_PIN_JIT", "1")
-    vm = resolve_model("paper-c-s")
-    general = _trace(vm, [-1, 0, 0], 0.004, 20, False)
-    monkeypatch.setattr(curve_mod, "FAST_RANK", 2.0)  # sv.min() > 2·sv.max() never holds
+def _count_generic_points(monkeypatch) -> dict:
+    """Count the calls of the generic point path (``_Tracer.point``)."""
     generic = {"n": 0}
     original_point = curve_mod._Tracer.point
 
@@ -149,6 +143,18 @@ def test_point_kernel_declining_falls_back_to_the_generic_point(monkeypatch):
         return original_point(self, eq, s)
 
     monkeypatch.setattr(curve_mod._Tracer, "point", point)
+    return generic
+
+
+def test_point_kernel_declining_falls_back_to_the_generic_point(monkeypatch):
+    """When the compiled point kernel declines (here: its rank test made impossible to pass), the fused
+    step hands the point to ``_Tracer.point`` and the curve is still the general path's."""
+    pytest.importorskip("numba")
+    monkeypatch.setenv("VJM_PIN_JIT", "1")
+    vm = resolve_model("paper-c-s")
+    general = _trace(vm, [-1, 0, 0], 0.004, 20, False)
+    monkeypatch.setattr(curve_mod, "FAST_RANK", 2.0)  # sv.min() > 2·sv.max() never holds
+    generic = _count_generic_points(monkeypatch)
     calls = _counting(monkeypatch)
     fused = _trace(vm, [-1, 0, 0], 0.004, 20, True)
     # every converged sub-step that passes the continuity check (nearly all) went to _Tracer.point
@@ -178,14 +184,7 @@ def test_point_kernel_raising_falls_back_to_the_generic_point(merged, monkeypatc
     monkeypatch.setattr(pk, "_reuse", raising)  # the unmerged step's point on the corrector's QR
     monkeypatch.setattr(pk, "_step", raising if merged else False)  # the merged step (False: not used)
     monkeypatch.setattr(curve_mod, "_merged", merged)
-    generic = {"n": 0}
-    original_point = curve_mod._Tracer.point
-
-    def point(self, eq, s):
-        generic["n"] += 1
-        return original_point(self, eq, s)
-
-    monkeypatch.setattr(curve_mod._Tracer, "point", point)
+    generic = _count_generic_points(monkeypatch)
     fused = _trace(vm, [-1, 0, 0], 0.004, 20, True)
     assert raised["n"] >= 20 and generic["n"] >= 20
     _assert_same_curve(fused, general)

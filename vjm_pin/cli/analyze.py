@@ -197,7 +197,7 @@ def control_dict(vm, held) -> dict:
     }
 
 
-def analysis_dict(vm, res, method="eq30") -> dict:
+def analysis_dict(vm, res, method="eq30", keep: dict | None = None) -> dict:
     """The JSON object of ``analyze`` for an equilibrium ``res`` of model ``vm``."""
     from vjm_pin.exceptions import SingularStiffness
     from vjm_pin.solver import loaded_stiffness, unloaded_stiffness
@@ -240,6 +240,8 @@ def analysis_dict(vm, res, method="eq30") -> dict:
         if rigid is not None:
             out["stiffness"] = rigid.stiffness
             out["stiffness_note"] = rigid_note(vm, rigid)
+            if keep is not None:  # (the caller's weakest-direction search reads its finite part)
+                keep["rigid"] = rigid
     return out
 
 
@@ -405,6 +407,7 @@ def run(args) -> int:
         vm = subdivide_model(vm.urdf, args.subdivide)
     loads, gravity = dead_loads_from_args(args, vm)
     method = args.method or "eq30"
+    kept: dict = {}  # (analysis_dict's rigid K_C, when there is one)
     if vm.closures or loads or gravity is not None:
         out = _run_mechanism(args, vm, loads, gravity)
     elif args.deflection is not None or args.wrench is None:
@@ -419,15 +422,14 @@ def run(args) -> int:
             _raise_if_out_of_reach(vm, solver, d, e)
             raise
         res = solver.verify(eq, method=method)
-        out = analysis_dict(vm, res, method)
+        out = analysis_dict(vm, res, method, kept)
     else:  # every task component loaded: Newton on the total potential
         solver = EquilibriumSolver(vm)
         res = solver.verify(solver.solve_wrench(finite_vector(args.wrench, "--wrench")), method=method)
-        out = analysis_dict(vm, res, method)
+        out = analysis_dict(vm, res, method, kept)
     k6, rigid = out["stiffness"], None
-    if k6 is not None and not np.isfinite(k6).all():  # infinite along a rigid direction (serial paths)
-        kres = rigid_stiffness(vm, res, method)
-        k6, rigid = kres.finite_part, kres.rigid
+    if "rigid" in kept:  # K_C infinite along a rigid direction (serial paths): its finite part
+        k6, rigid = kept["rigid"].finite_part, kept["rigid"].rigid
     # a robot's default task drops the directions its pose cannot move (robots.default_task)
     lost = [name_direction(v, COMPONENTS) for v in lost_directions(vm)] if robot is not None else []
     out["weakest"] = weakest_direction(k6, vm.task, lost, rigid)
@@ -451,15 +453,13 @@ def _raise_if_out_of_reach(vm, solver, d, err) -> None:
     from vjm_pin.solver.checks import rigid_reach
     from vjm_pin.solver.stiffness import rigid_directions
 
+    from vjm_pin.exceptions import InputError
+    from vjm_pin.model.task import task_vector
+
     t = list(vm.task)
-    d6 = np.asarray(d, float).ravel()
-    if d6.size == 3:
-        d6 = np.concatenate([d6, np.zeros(3)])
-    elif d6.size == len(t) and d6.size != 6:
-        full = np.zeros(6)
-        full[t] = d6
-        d6 = full
-    if d6.size != 6:
+    try:  # (as the solver reads a deflection)
+        d6 = task_vector(d, vm.task, "deflection", "m, rad", task_sized=True, outside_task="keep")
+    except InputError:
         return
     x = np.asarray(vm.reference, float)
     b = blocks_at(vm, x, np.zeros(6), solver.kin)

@@ -840,10 +840,7 @@ class EquilibriumSolver:
         # kernel.get(mode): the loaded compiled kernel in modes "1" and "auto" (get's own answer, without its calls)
         fn = c if c and ctx[0] != "0" else kernel.get(ctx[0])
         if flushed is FRESH:
-            route = ctx[11] if len(ctx) > 11 else None
-            if (route is None or route[0] is not fn or ctx[4] is not fn or ctx[10] is not route[1]
-                    or route[2] is not self.kin or route[3] != self._fast_max_iter):
-                route = self._corrector_route(ctx, fn)
+            route = self._route_now(ctx, fn)
             if route is not None:
                 self._fast_its = 0
                 return self._corrector_looped(ctx, route, p_t, r_t, x)
@@ -855,6 +852,15 @@ class EquilibriumSolver:
             ctx[6] = kernel.workspace(consts[0], self.kin.model.nq) if lean is not None else None
         self._fast_its = 0
         return self._fused_iterations(ctx, p_t, r_t, x, bool(flushed))
+
+    def _route_now(self, ctx, fn):
+        """The route kept in ``ctx`` (:meth:`_corrector_route`) while it is valid for the step function
+        ``fn``, the plan, the kinematics and ``_fast_max_iter``; else made anew (None: not set up)."""
+        route = ctx[11] if len(ctx) > 11 else None
+        if (route is None or route[0] is not fn or ctx[4] is not fn or ctx[10] is not route[1]
+                or route[2] is not self.kin or route[3] != self._fast_max_iter):
+            route = self._corrector_route(ctx, fn)
+        return route
 
     def _corrector_route(self, ctx, fn):
         """The per-context constants of :meth:`_corrector_looped` (kept as ``ctx``'s twelfth item), or
@@ -915,15 +921,10 @@ class EquilibriumSolver:
         kept target rotation (C-contiguous float64). Returns ``(out, raw)``: ``fn``'s tuple and the raw
         equilibrium of :meth:`_looped_finish` (None unless converged: ``_fast_its`` set as there), or
         None when the one-call loop is not set up for ``ctx`` (call :meth:`_corrector`)."""
-        kernel = _kernel
-        c = kernel._compiled
-        lf = c if c and ctx[0] != "0" else kernel.get(ctx[0])
-        route = ctx[11] if len(ctx) > 11 else None
-        if (route is None or route[0] is not lf or ctx[4] is not lf or ctx[10] is not route[1]
-                or route[2] is not self.kin or route[3] != self._fast_max_iter):
-            route = self._corrector_route(ctx, lf)
-            if route is None:
-                return None
+        c = _kernel._compiled
+        route = self._route_now(ctx, c if c and ctx[0] != "0" else _kernel.get(ctx[0]))
+        if route is None:
+            return None
         step_fn, plan, kin, _, lim, ck, rot, defer, later, spectrum = route
         _, _, kbuf, ci, cf, kz, mask, theta0, vscale, escale, thr = plan[:11]
         xout, ws = ctx[6]
